@@ -1,0 +1,63 @@
+"""The 49 grasping objects: a seeded EGAD-style generator, an EGAD importer, metrics.
+
+ROS-free. Main entry points:
+
+- :func:`generate_object_set` writes ``<out_dir>/<TASK>/{model.urdf, visual.obj,
+  collision.obj}``, ``objects.json`` and ``contact_sheet.png``;
+- :func:`import_egad` builds the same layout from EGAD's ``A0.obj`` .. ``G6.obj``;
+- :func:`render_contact_sheet` renders a 7x7 overview of an objects directory;
+- :func:`record_scripted_grasp_success` stores a graspability check in ``objects.json``.
+
+Load a task with ``p.loadURDF(str(objects_dir / task / "model.urdf"),
+flags=p.URDF_USE_INERTIA_FROM_FILE)``; the link frame is the object's centre
+of mass and its axes are sorted so x is the longest extent and z the shortest.
+"""
+
+from glocal_ros.objects.grid import GridAssignment, GridAssignmentError, assign_grid
+from glocal_ros.objects.meshing import GRIPPER_FIT_FRACTION, GRIPPER_WIDTH
+from glocal_ros.objects.metadata import (
+    METADATA_FILE,
+    ObjectMetadata,
+    ObjectSetMetadata,
+    record_scripted_grasp_success,
+)
+from glocal_ros.objects.metrics import GraspDifficulty, grasp_difficulty, morphological_complexity
+from glocal_ros.objects.physics import FrictionConfig, MassConfig, VhacdConfig
+from glocal_ros.objects.pipeline import (
+    GENERATOR_VERSION,
+    CandidateMetrics,
+    GeneratorConfig,
+    MissingEgadFilesError,
+    ProgressCallback,
+    generate_object_set,
+    import_egad,
+    sample_candidates,
+)
+from glocal_ros.objects.render import render_contact_sheet
+
+__all__ = [
+    "GENERATOR_VERSION",
+    "GRIPPER_FIT_FRACTION",
+    "GRIPPER_WIDTH",
+    "METADATA_FILE",
+    "CandidateMetrics",
+    "FrictionConfig",
+    "GeneratorConfig",
+    "GraspDifficulty",
+    "GridAssignment",
+    "GridAssignmentError",
+    "MassConfig",
+    "MissingEgadFilesError",
+    "ObjectMetadata",
+    "ObjectSetMetadata",
+    "ProgressCallback",
+    "VhacdConfig",
+    "assign_grid",
+    "generate_object_set",
+    "grasp_difficulty",
+    "import_egad",
+    "morphological_complexity",
+    "record_scripted_grasp_success",
+    "render_contact_sheet",
+    "sample_candidates",
+]

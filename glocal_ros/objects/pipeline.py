@@ -1,0 +1,315 @@
+"""Generate the 49-object set (or import EGAD's) into ``<out_dir>/<TASK>/``.
+
+Each task directory holds ``model.urdf``, ``visual.obj`` (decimated) and
+``collision.obj`` (V-HACD hulls); ``<out_dir>/objects.json`` holds the
+metrics (see :mod:`glocal_ros.objects.metadata`).
+"""
+
+from __future__ import annotations
+
+import concurrent.futures
+from dataclasses import asdict, dataclass, field
+from pathlib import Path
+from typing import Callable, Optional, Sequence
+
+import numpy as np
+import trimesh
+
+from glocal_ros.objects.cppn import CPPNParams, evaluate_field, sample_cppn, solid_bounds
+from glocal_ros.objects.grid import BINNING_METHOD, assign_grid
+from glocal_ros.objects.meshing import (
+    GRIPPER_FIT_FRACTION,
+    GRIPPER_WIDTH,
+    EmptyFieldError,
+    decimate,
+    field_to_mesh,
+    prepare_for_gripper,
+    write_obj,
+)
+from glocal_ros.objects.metadata import ObjectMetadata, ObjectSetMetadata
+from glocal_ros.objects.metrics import (
+    COMPLEXITY_BINS,
+    COMPLEXITY_RANGE,
+    FRICTION_COEFFICIENT,
+    QUALITY_PERCENTILE,
+    GraspDifficulty,
+    grasp_difficulty,
+    morphological_complexity,
+)
+from glocal_ros.objects.physics import (
+    FrictionConfig,
+    MassConfig,
+    VhacdConfig,
+    convex_decomposition,
+    mass_properties,
+    write_urdf,
+)
+from glocal_ros.objects.render import render_contact_sheet
+from glocal_ros.tasks import ALL_TASKS, validate_tasks
+
+GENERATOR_VERSION = "1.0.0"
+
+#: ``progress(stage, done, total)``; stages are "candidates" and "objects".
+ProgressCallback = Callable[[str, int, int], None]
+
+
+@dataclass(frozen=True)
+class GeneratorConfig:
+    """Everything besides the seed that determines the generated set."""
+
+    resolution: int = 56
+    coarse_resolution: int = 32
+    visual_faces: int = 1000
+    grasp_samples: int = 400
+    # Candidates with fewer antipodal grasps than this are likely
+    # ungraspable by a parallel-jaw gripper and never enter the grid.
+    min_antipodal_fraction: float = 0.05
+    gripper_width: float = GRIPPER_WIDTH
+    fit_fraction: float = GRIPPER_FIT_FRACTION
+    mass: MassConfig = field(default_factory=MassConfig)
+    friction: FrictionConfig = field(default_factory=FrictionConfig)
+    vhacd: VhacdConfig = field(default_factory=VhacdConfig)
+
+    def to_dict(self) -> dict:
+        out = asdict(self)
+        out["complexity_histogram"] = {"bins": COMPLEXITY_BINS, "range": list(COMPLEXITY_RANGE)}
+        out["grasp_metric"] = {"friction_coefficient": FRICTION_COEFFICIENT, "percentile": QUALITY_PERCENTILE}
+        return out
+
+
+@dataclass(frozen=True)
+class CandidateMetrics:
+    """Grid metrics of one generated candidate."""
+
+    index: int
+    complexity: float
+    difficulty: float
+    antipodal_fraction: float
+
+
+@dataclass
+class _Measured:
+    complexity: float
+    grasp: GraspDifficulty
+    raw: trimesh.Trimesh
+    visual: trimesh.Trimesh
+    solid: trimesh.Trimesh
+
+
+def _measure(mesh: trimesh.Trimesh, grasp_rng: np.random.Generator, config: GeneratorConfig) -> _Measured:
+    # Complexity on the full marching-cubes mesh, before decimation and
+    # scaling (it is scale-invariant); difficulty on the scaled visual mesh,
+    # the geometry the gripper actually meets.
+    complexity = morphological_complexity(mesh)
+    visual = decimate(mesh, config.visual_faces)
+    visual, solid = prepare_for_gripper(visual, mesh, config.gripper_width, config.fit_fraction)
+    grasp = grasp_difficulty(visual, grasp_rng, config.grasp_samples, config.gripper_width)
+    return _Measured(complexity, grasp, mesh, visual, solid)
+
+
+def _candidate_rngs(seed: int, index: int) -> tuple[np.random.Generator, np.random.Generator]:
+    # Independent streams per candidate: rebuilding one candidate reproduces
+    # its metrics without replaying the others.
+    return np.random.default_rng([seed, index, 0]), np.random.default_rng([seed, index, 1])
+
+
+def candidate_mesh(seed: int, index: int, config: GeneratorConfig) -> tuple[CPPNParams, trimesh.Trimesh]:
+    """The CPPN and marching-cubes mesh of candidate ``index`` of the pool seeded by ``seed``.
+
+    Raises :class:`EmptyFieldError` if the field has no usable solid.
+    """
+    shape_rng, _ = _candidate_rngs(seed, index)
+    # Square root skews knobs upward: low knobs all give similar plain blobs,
+    # the complex end needs more draws to populate its columns.
+    params = sample_cppn(shape_rng, float(shape_rng.random()) ** 0.5)
+    lower, upper = solid_bounds(params, config.coarse_resolution)
+    field_values, spacing = evaluate_field(params, config.resolution, lower, upper)
+    return params, field_to_mesh(field_values, spacing)
+
+
+def evaluate_candidate(seed: int, index: int, config: GeneratorConfig) -> Optional[CandidateMetrics]:
+    """Grid metrics of one candidate, or None if it does not mesh."""
+    try:
+        _, mesh = candidate_mesh(seed, index, config)
+    except EmptyFieldError:
+        return None
+    measured = _measure(mesh, _candidate_rngs(seed, index)[1], config)
+    return CandidateMetrics(
+        index=index,
+        complexity=measured.complexity,
+        difficulty=measured.grasp.difficulty,
+        antipodal_fraction=measured.grasp.antipodal_fraction,
+    )
+
+
+def _evaluate_star(args: tuple[int, int, GeneratorConfig]) -> Optional[CandidateMetrics]:
+    return evaluate_candidate(*args)
+
+
+def sample_candidates(
+    seed: int,
+    candidates: int,
+    config: GeneratorConfig = GeneratorConfig(),
+    workers: int = 1,
+    progress: Optional[ProgressCallback] = None,
+) -> list[Optional[CandidateMetrics]]:
+    """Metrics of candidates ``0..candidates-1`` (None where a candidate failed to mesh)."""
+    jobs = [(seed, i, config) for i in range(candidates)]
+    results: list[Optional[CandidateMetrics]] = []
+    if workers > 1:
+        with concurrent.futures.ProcessPoolExecutor(max_workers=workers) as pool:
+            for result in pool.map(_evaluate_star, jobs, chunksize=8):
+                results.append(result)
+                if progress:
+                    progress("candidates", len(results), candidates)
+    else:
+        for job in jobs:
+            results.append(_evaluate_star(job))
+            if progress:
+                progress("candidates", len(results), candidates)
+    return results
+
+
+def _write_object(
+    task: str, measured: _Measured, out_dir: Path, config: GeneratorConfig, **provenance
+) -> ObjectMetadata:
+    task_dir = out_dir / task
+    task_dir.mkdir(parents=True, exist_ok=True)
+    write_obj(measured.visual, task_dir / "visual.obj")
+    hulls, hull_vertices = convex_decomposition(measured.solid, task_dir / "collision.obj", config.vhacd)
+    props = mass_properties(measured.solid, config.mass)
+    write_urdf(task_dir / "model.urdf", task, props, config.friction)
+    return ObjectMetadata(
+        task=task,
+        complexity=round(measured.complexity, 6),
+        difficulty=round(measured.grasp.difficulty, 6),
+        grasp_quality_q75=round(measured.grasp.quality_q75, 6),
+        antipodal_fraction=round(measured.grasp.antipodal_fraction, 6),
+        grasp_samples=measured.grasp.samples,
+        extents=[round(float(e), 6) for e in measured.visual.extents],
+        volume=float(f"{props.volume:.6g}"),
+        mass=float(f"{props.mass:.6g}"),
+        density=float(f"{props.mass / props.volume:.6g}"),
+        inertia=[[float(f"{v:.6e}") for v in row] for row in props.inertia],
+        raw_vertices=len(measured.raw.vertices),
+        raw_faces=len(measured.raw.faces),
+        visual_vertices=len(measured.visual.vertices),
+        visual_faces=len(measured.visual.faces),
+        hull_count=hulls,
+        collision_vertices=hull_vertices,
+        **provenance,
+    )
+
+
+def generate_object_set(
+    out_dir: Path,
+    seed: int = 0,
+    candidates: int = 1500,
+    progress: Optional[ProgressCallback] = None,
+    config: GeneratorConfig = GeneratorConfig(),
+    workers: int = 1,
+    tasks: Optional[Sequence[str]] = None,
+    contact_sheet: bool = True,
+) -> ObjectSetMetadata:
+    """Generate a seeded candidate pool, bin it on the grid and write the chosen objects.
+
+    :param out_dir: output root; ``<out_dir>/<TASK>/`` and ``objects.json`` are written.
+    :param seed: pool seed; the same seed and config give the same objects and metrics.
+    :param candidates: pool size (at least 49 valid ones are needed; each
+        complexity column needs 7).
+    :param progress: optional ``progress(stage, done, total)`` callback.
+    :param config: generator settings.
+    :param workers: processes for candidate evaluation (results do not depend on it).
+    :param tasks: write only these tasks (the grid is still chosen from the
+        whole pool); ``objects.json`` then lists only them.
+    :param contact_sheet: also render ``<out_dir>/contact_sheet.png``.
+    """
+    out_dir = Path(out_dir)
+    chosen_tasks = validate_tasks(tasks) if tasks is not None else list(ALL_TASKS)
+    pool = sample_candidates(seed, candidates, config, workers, progress)
+    valid = [m for m in pool if m is not None and m.antipodal_fraction >= config.min_antipodal_fraction]
+    grid = assign_grid([m.complexity for m in valid], [m.difficulty for m in valid])
+
+    metadata = ObjectSetMetadata(
+        generator_version=GENERATOR_VERSION,
+        source="generated",
+        config=config.to_dict(),
+        binning={"method": BINNING_METHOD, "complexity_edges": grid.complexity_edges},
+        seed=seed,
+        candidates=candidates,
+        valid_candidates=len(valid),
+    )
+    out_dir.mkdir(parents=True, exist_ok=True)
+    for done, task in enumerate(chosen_tasks, start=1):
+        index = valid[grid.cells[task]].index
+        params, mesh = candidate_mesh(seed, index, config)
+        measured = _measure(mesh, _candidate_rngs(seed, index)[1], config)
+        metadata.objects[task] = _write_object(
+            task,
+            measured,
+            out_dir,
+            config,
+            source="generated",
+            seed=seed,
+            candidate_index=index,
+            generator_params=params.to_dict(),
+        )
+        if progress:
+            progress("objects", done, len(chosen_tasks))
+    metadata.save(out_dir)
+    if contact_sheet:
+        render_contact_sheet(out_dir, out_dir / "contact_sheet.png")
+    return metadata
+
+
+class MissingEgadFilesError(FileNotFoundError):
+    """The EGAD directory lacks some of the A0.obj..G6.obj files."""
+
+
+def import_egad(
+    src_dir: Path,
+    out_dir: Path,
+    config: GeneratorConfig = GeneratorConfig(),
+    require_all: bool = True,
+    progress: Optional[ProgressCallback] = None,
+    contact_sheet: bool = True,
+) -> ObjectSetMetadata:
+    """Build the same layout from EGAD's evaluation-set meshes (``A0.obj`` .. ``G6.obj``).
+
+    Each mesh goes through the generator's steps: complexity on the mesh as
+    given (EGAD's own marching-cubes mesh), decimation, EGAD gripper scaling,
+    grasp difficulty, V-HACD, URDF and metadata. The task is the file name;
+    EGAD's grid placement is kept, and the measured metrics are recorded.
+
+    :param require_all: raise :class:`MissingEgadFilesError` unless all 49 files exist;
+        if False, import whichever of them exist (at least one).
+    """
+    src_dir, out_dir = Path(src_dir), Path(out_dir)
+    found = {task: src_dir / f"{task}.obj" for task in ALL_TASKS if (src_dir / f"{task}.obj").exists()}
+    missing = [task for task in ALL_TASKS if task not in found]
+    if (require_all and missing) or not found:
+        raise MissingEgadFilesError(f"{src_dir}: missing {', '.join(missing)}")
+    metadata = ObjectSetMetadata(
+        generator_version=GENERATOR_VERSION,
+        source="egad",
+        config=config.to_dict(),
+        binning={"method": "EGAD evaluation-set file names (A0..G6) as published"},
+    )
+    out_dir.mkdir(parents=True, exist_ok=True)
+    for done, (task, path) in enumerate(found.items(), start=1):
+        mesh = trimesh.load(path, force="mesh", process=True)
+        if not mesh.is_watertight:
+            trimesh.repair.fill_holes(mesh)
+        if mesh.volume < 0:
+            mesh.invert()
+        # Seeded by the grid position, so a re-import gives the same metrics.
+        measured = _measure(mesh, np.random.default_rng([ALL_TASKS.index(task), 1]), config)
+        metadata.objects[task] = _write_object(
+            task, measured, out_dir, config, source="egad", source_file=path.name
+        )
+        if progress:
+            progress("objects", done, len(found))
+    metadata.save(out_dir)
+    if contact_sheet:
+        render_contact_sheet(out_dir, out_dir / "contact_sheet.png")
+    return metadata

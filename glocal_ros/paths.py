@@ -1,0 +1,48 @@
+"""Where the project's data lives, in a source checkout and when installed.
+
+A source checkout (or an editable install) keeps ``assets/`` and
+``msg_schemas/`` next to the packages; an installed package (colcon, or
+``setup.py install_data``) has them under ``share/glocal_ros`` and
+``share/glocal_interfaces`` of its prefix.
+"""
+
+from __future__ import annotations
+
+import os
+import sys
+from pathlib import Path
+
+SOURCE_ROOT = Path(__file__).resolve().parent.parent
+
+
+def _installed_share(package: str) -> Path | None:
+    prefixes = [p for p in os.environ.get("AMENT_PREFIX_PATH", "").split(os.pathsep) if p] + [sys.prefix]
+    for prefix in prefixes:
+        share = Path(prefix) / "share" / package
+        if share.is_dir():
+            return share
+    return None
+
+
+def assets_dir() -> Path:
+    """``assets/``: object set, priors, parameter presets."""
+    if (SOURCE_ROOT / "assets").is_dir():
+        return SOURCE_ROOT / "assets"
+    share = _installed_share("glocal_ros")
+    if share is None or not (share / "assets").is_dir():
+        raise FileNotFoundError("no assets/ in the source tree nor in share/glocal_ros of AMENT_PREFIX_PATH")
+    return share / "assets"
+
+
+def objects_dir() -> Path:
+    return assets_dir() / "objects"
+
+
+def interface_definitions_dir() -> Path:
+    """The .msg files of glocal_interfaces (message definitions for recording)."""
+    if (SOURCE_ROOT / "msg_schemas" / "msg").is_dir():
+        return SOURCE_ROOT / "msg_schemas" / "msg"
+    share = _installed_share("glocal_interfaces")
+    if share is None:
+        raise FileNotFoundError("glocal_interfaces is not installed: run `make setup`")
+    return share / "msg"

@@ -1,0 +1,46 @@
+"""Blocking service calls from worker threads.
+
+A node that serves a request by calling other services (the learner calls the
+sim for every step) blocks in a callback while a MultiThreadedExecutor spins
+the response in another thread. ``spin_until_future_complete`` would spin a
+second executor and costs milliseconds per call; waiting on an event does not.
+Clients used this way must sit in a ``ReentrantCallbackGroup`` (or any group
+other than the waiting callback's).
+"""
+
+from __future__ import annotations
+
+import threading
+from typing import Any
+
+from rclpy.client import Client
+
+
+class ServiceCallError(RuntimeError):
+    """The service is missing, did not answer in time, or answered an error."""
+
+
+def wait_for_service(client: Client, timeout_sec: float) -> None:
+    if not client.wait_for_service(timeout_sec=timeout_sec):
+        raise ServiceCallError(f"service {client.srv_name} is not available after {timeout_sec:.0f} s")
+
+
+def call(client: Client, request: Any, timeout_sec: float = 60.0) -> Any:
+    """Send ``request`` and wait for the response; needs an executor spinning elsewhere."""
+    future = client.call_async(request)
+    done = threading.Event()
+    future.add_done_callback(lambda _: done.set())
+    if not done.wait(timeout_sec):
+        client.remove_pending_request(future)
+        raise ServiceCallError(f"service {client.srv_name} did not answer within {timeout_sec:.0f} s")
+    if future.exception() is not None:
+        raise ServiceCallError(f"service {client.srv_name} failed: {future.exception()}")
+    return future.result()
+
+
+def call_checked(client: Client, request: Any, timeout_sec: float = 60.0) -> Any:
+    """``call``, raising ``ServiceCallError`` when the response says ``success=False``."""
+    response = call(client, request, timeout_sec)
+    if not response.success:
+        raise ServiceCallError(f"{client.srv_name}: {response.message}")
+    return response

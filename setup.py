@@ -1,0 +1,52 @@
+"""ament_python package ``glocal_ros``: pip-installable and colcon-buildable.
+
+Dependencies are pinned in requirements.txt (and constraints.txt); ``make
+setup`` installs them. Nodes are installed twice on purpose: as console
+scripts (on PATH in a venv) and as plain executables in ``lib/glocal_ros``,
+where ``ros2 run`` looks on a full ROS 2 install (pip ignores setup.cfg's
+``install_scripts``, colcon honours it).
+"""
+
+import os
+from pathlib import Path
+
+from setuptools import find_packages, setup
+
+PACKAGE = "glocal_ros"
+NODES = ("sim_node", "learner_node", "curriculum_node", "recorder_node")
+HERE = Path(__file__).resolve().parent
+
+
+def asset_files() -> list[tuple[str, list[str]]]:
+    """Everything under assets/, mirrored into share/glocal_ros/assets."""
+    entries = []
+    for folder, _, files in sorted(os.walk(HERE / "assets")):
+        if files:
+            relative = Path(folder).relative_to(HERE)
+            entries.append((f"share/{PACKAGE}/{relative}", sorted(str(relative / f) for f in files)))
+    return entries
+
+
+setup(
+    name=PACKAGE,
+    version="0.1.0",
+    packages=find_packages(include=[PACKAGE, f"{PACKAGE}.*", "node_common", *NODES], exclude=["test"]),
+    data_files=[
+        ("share/ament_index/resource_index/packages", [f"resource/{PACKAGE}"]),
+        (f"share/{PACKAGE}", ["package.xml"]),
+        (f"lib/{PACKAGE}", [f"bin/{node}" for node in NODES]),
+        *asset_files(),
+    ],
+    install_requires=["setuptools"],
+    zip_safe=False,
+    maintainer="glocal_ros maintainers",
+    maintainer_email="maintainers@glocal-ros.org",
+    description="GloCAL curriculum learning of Panda grasps as a ROS 2 node graph",
+    license="Apache-2.0",
+    entry_points={
+        "console_scripts": [
+            "glocal-ros = glocal_ros.cli:main",
+            *(f"{node} = {node}.{node}:main" for node in NODES),
+        ],
+    },
+)

@@ -1,0 +1,91 @@
+"""Fixtures shared by the suite: an isolated ROS domain, node processes, a test node.
+
+Every pytest run takes a ROS_DOMAIN_ID that no other run on this machine
+holds (``glocal_ros.domain``) and keeps discovery on loopback, so parallel
+runs never see each other.
+"""
+
+from __future__ import annotations
+
+import os
+import sys
+import tempfile
+import threading
+import time
+from pathlib import Path
+
+import pytest
+
+from glocal_ros.domain import reserve_domain_id
+from glocal_ros.processes import NodeProcess
+
+REPO = Path(__file__).resolve().parent.parent
+
+_DOMAIN_ID, _DOMAIN_LOCK = reserve_domain_id()
+os.environ["ROS_DOMAIN_ID"] = str(_DOMAIN_ID)
+os.environ["ROS_AUTOMATIC_DISCOVERY_RANGE"] = "LOCALHOST"
+os.environ["ROS_LOG_DIR"] = tempfile.mkdtemp(prefix="glocal-ros-log-")
+os.environ.setdefault("AMENT_PREFIX_PATH", sys.prefix)
+os.environ["PYTHONUNBUFFERED"] = "1"
+
+
+def pytest_sessionfinish(session, exitstatus):
+    _DOMAIN_LOCK.close()
+
+
+@pytest.fixture
+def start_node(tmp_path):
+    """``start_node(name, **params)`` starts a node process; all are stopped after the test."""
+    started: list[NodeProcess] = []
+
+    def start(node: str, extra_args: tuple[str, ...] = (), **params) -> NodeProcess:
+        process = NodeProcess(node, tmp_path, params, extra_args=extra_args, cwd=REPO)
+        started.append(process)
+        return process
+
+    yield start
+    for process in reversed(started):
+        process.stop()
+
+
+@pytest.fixture
+def ros_node():
+    """An rclpy node of the test itself, spun by a background executor."""
+    import rclpy
+    from rclpy.executors import MultiThreadedExecutor
+
+    context = rclpy.Context()
+    rclpy.init(context=context)
+    node = rclpy.create_node(f"test_{os.getpid()}", context=context)
+    executor = MultiThreadedExecutor(num_threads=4, context=context)
+    executor.add_node(node)
+    stop = threading.Event()
+
+    def spin():
+        while not stop.is_set():
+            executor.spin_once(timeout_sec=0.1)
+
+    spinner = threading.Thread(target=spin, daemon=True)
+    spinner.start()
+    yield node
+    stop.set()
+    spinner.join(5)
+    executor.shutdown()
+    node.destroy_node()
+    rclpy.shutdown(context=context)
+
+
+def wait_until(predicate, timeout: float, what: str, poll: float = 0.05, processes=()):
+    """Poll ``predicate`` until it is truthy; fail with ``what`` and the node logs on time-out."""
+    deadline = time.monotonic() + timeout
+    while time.monotonic() < deadline:
+        value = predicate()
+        if value:
+            return value
+        for process in processes:
+            if process.process.poll() is not None:
+                pytest.fail(f"{process.node} exited with {process.process.returncode} while waiting for {what}:\n"
+                            f"{process.log()}")
+        time.sleep(poll)
+    logs = "\n".join(f"--- {p.node} ---\n{p.log()}" for p in processes)
+    pytest.fail(f"timed out after {timeout} s waiting for {what}\n{logs}")

@@ -1,0 +1,40 @@
+"""`glocal-ros run` and `glocal-ros evaluate` as a user types them."""
+
+import json
+import signal
+import subprocess
+import sys
+
+from conftest import REPO, wait_until
+
+GLOCAL_ROS = [sys.executable, "-m", "glocal_ros.cli"]
+
+
+def run_cli(*args, timeout=120):
+    return subprocess.run([*GLOCAL_ROS, *args], capture_output=True, text=True, timeout=timeout, cwd=REPO)
+
+
+def test_run_starts_a_node_that_the_graph_sees(start_node, ros_node):
+    sim = start_node("sim_node", num_envs=1)
+    wait_until(lambda: "sim_node" in ros_node.get_node_names(), 60, "sim_node on the graph", processes=[sim])
+    assert sim.stop(signal.SIGINT) == 0, sim.log()
+
+
+def test_run_refuses_an_unknown_node():
+    result = run_cli("run", "no_such_node")
+    assert result.returncode == 2 and "invalid choice" in result.stderr
+
+
+def test_evaluate_prints_json_scores(start_node, ros_node):
+    start_node("sim_node", num_envs=2, max_steps=8)
+    start_node("learner_node")
+    result = run_cli("evaluate", "--policy", "random", "--tasks", "A0,C3", "--episodes", "2", "--json")
+    assert result.returncode == 0, result.stderr
+    scores = json.loads(result.stdout.strip().splitlines()[-1])
+    assert set(scores) == {"A0", "C3"} and all(0 <= v <= 2 for v in scores.values())
+
+
+def test_evaluate_reports_bad_input_without_a_traceback():
+    result = run_cli("evaluate", "--policy", "random", "--tasks", "A0,Z1")
+    assert result.returncode == 2
+    assert "unknown task 'Z1'" in result.stderr and "Traceback" not in result.stderr

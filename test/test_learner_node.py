@@ -1,0 +1,48 @@
+"""learner_node against a real sim_node: the Evaluate service and bad requests."""
+
+import pytest
+from glocal_interfaces.msg import EvaluationResult
+from glocal_interfaces.srv import Evaluate, ListPolicies
+
+from conftest import wait_until
+from node_common import names, qos
+from node_common.calls import call
+
+
+@pytest.fixture
+def learner(start_node, ros_node):
+    sim = start_node("sim_node", num_envs=2, max_steps=10)
+    learner = start_node("learner_node", max_eval_episodes=50)
+    evaluate = ros_node.create_client(Evaluate, names.LEARNER_EVALUATE)
+    wait_until(evaluate.service_is_ready, 60, "learner/evaluate", processes=[sim, learner])
+    return learner, evaluate
+
+
+def test_evaluate_scores_every_task(learner, ros_node):
+    process, evaluate = learner
+    evaluations = []
+    ros_node.create_subscription(EvaluationResult, names.EVALUATIONS, evaluations.append, qos.EVENTS)
+    response = call(evaluate, Evaluate.Request(policy="random", tasks=["A0", "D3", "G6"], episodes=3, seed=4))
+    assert response.success, response.message
+    assert [(s.task, s.episodes) for s in response.scores] == [("A0", 3), ("D3", 3), ("G6", 3)]
+    assert all(0 <= s.successes <= 3 for s in response.scores)
+    wait_until(lambda: evaluations, 10, "the evaluation on glocal/evaluations", processes=[process])
+    assert evaluations[0].policy == "random" and evaluations[0].purpose == "request"
+
+    policies = call(ros_node.create_client(ListPolicies, names.LEARNER_LIST_POLICIES), ListPolicies.Request())
+    assert "random" in [p.name for p in policies.policies]
+
+
+@pytest.mark.parametrize("request_fields, message", [
+    ({"policy": "no_such_policy", "tasks": ["A0"]}, "unknown policy 'no_such_policy'"),
+    ({"policy": "random", "tasks": ["A0", "K2"]}, "unknown task 'K2'"),
+    ({"policy": "random", "tasks": []}, "no task"),
+    ({"policy": "random", "tasks": ["A0", "A0"]}, "repeat"),
+    ({"policy": "random", "tasks": ["A0"], "episodes": 51}, "max_eval_episodes"),
+])
+def test_bad_evaluate_is_answered_and_the_node_keeps_serving(learner, request_fields, message):
+    process, evaluate = learner
+    response = call(evaluate, Evaluate.Request(**{"seed": -1, "episodes": 2, **request_fields}))
+    assert not response.success and message in response.message
+    assert call(evaluate, Evaluate.Request(policy="random", tasks=["A0"], episodes=1, seed=-1)).success
+    assert process.process.poll() is None

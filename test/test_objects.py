@@ -1,0 +1,240 @@
+"""Tests for glocal_ros.objects: metrics, binning, pipeline, importer and the committed set."""
+
+from __future__ import annotations
+
+import json
+import shutil
+import subprocess
+import sys
+from dataclasses import replace
+from pathlib import Path
+
+import numpy as np
+import pybullet as p
+import pytest
+import trimesh
+
+from glocal_ros.objects import (
+    GRIPPER_FIT_FRACTION,
+    GRIPPER_WIDTH,
+    GeneratorConfig,
+    GridAssignmentError,
+    MissingEgadFilesError,
+    ObjectSetMetadata,
+    assign_grid,
+    generate_object_set,
+    grasp_difficulty,
+    import_egad,
+    morphological_complexity,
+    record_scripted_grasp_success,
+    sample_candidates,
+)
+from glocal_ros.objects.meshing import prepare_for_gripper
+from glocal_ros.objects.metrics import angular_deficits
+from glocal_ros.objects.pipeline import candidate_mesh
+from glocal_ros.objects.raycast import first_hits
+from glocal_ros.tasks import ALL_TASKS, grid_coordinates
+
+REPO = Path(__file__).resolve().parents[1]
+ASSETS = REPO / "assets" / "objects"
+# Small enough that a whole pool takes seconds; only tests use it.
+FAST = GeneratorConfig(resolution=28, coarse_resolution=20, visual_faces=300, grasp_samples=120)
+TOL = 1e-3
+
+
+def test_library_is_ros_free() -> None:
+    code = "import sys, glocal_ros.objects; assert 'rclpy' not in sys.modules"
+    subprocess.run([sys.executable, "-c", code], check=True, cwd=REPO)
+
+
+def test_angular_deficits_obey_gauss_bonnet() -> None:
+    sphere = trimesh.creation.icosphere(subdivisions=3)
+    assert angular_deficits(sphere).sum() == pytest.approx(4.0 * np.pi)
+
+
+def test_complexity_orders_box_sphere_and_lobed_shape() -> None:
+    box = trimesh.creation.box(extents=(1.0, 2.0, 3.0))
+    sphere = trimesh.creation.icosphere(subdivisions=4)
+    bumpy = sphere.copy()
+    v = bumpy.vertices
+    bumpy.vertices = v * (1.0 + 0.3 * np.sin(5 * v[:, :1]) * np.cos(4 * v[:, 1:2]))
+    assert morphological_complexity(box) == 0.0  # every corner has deficit pi/2
+    assert morphological_complexity(sphere) < morphological_complexity(bumpy)
+
+
+def test_raycast_hits_box_face() -> None:
+    box = trimesh.creation.box(extents=(2.0, 2.0, 2.0))
+    dist, face = first_hits(np.asarray(box.triangles), np.zeros((2, 3)), np.array([[1.0, 0, 0], [0, 0, -1.0]]))
+    assert dist == pytest.approx([1.0, 1.0])
+    assert (face >= 0).all()
+    miss, face = first_hits(np.asarray(box.triangles), np.array([[5.0, 0, 0]]), np.array([[1.0, 0, 0]]))
+    assert np.isinf(miss[0]) and face[0] == -1
+
+
+def test_grasp_difficulty_easy_box_vs_too_wide_box() -> None:
+    rng = np.random.default_rng(0)
+    small = trimesh.creation.box(extents=(0.06, 0.04, 0.03))
+    wide = trimesh.creation.box(extents=(0.1, 0.1, 0.1))
+    easy = grasp_difficulty(small, rng, samples=300)
+    hard = grasp_difficulty(wide, rng, samples=300)
+    assert 0.0 <= easy.difficulty < 0.7 and easy.antipodal_fraction > 0.5
+    assert hard.difficulty == 1.0 and hard.antipodal_fraction == 0.0
+
+
+def test_prepare_for_gripper_follows_egad_scaling() -> None:
+    long = trimesh.creation.box(extents=(3.0, 1.0, 2.0))
+    visual, solid = prepare_for_gripper(long, long)
+    assert visual.extents == pytest.approx([GRIPPER_WIDTH, 2 * GRIPPER_WIDTH / 3, GRIPPER_WIDTH / 3])
+    assert solid.center_mass == pytest.approx(np.zeros(3), abs=1e-9)
+    cube = trimesh.creation.box(extents=(5.0, 5.0, 5.0))
+    visual, _ = prepare_for_gripper(cube, cube)
+    assert visual.extents == pytest.approx([GRIPPER_FIT_FRACTION * GRIPPER_WIDTH] * 3)
+
+
+def test_assign_grid_fills_every_cell_in_order() -> None:
+    rng = np.random.default_rng(1)
+    complexity = rng.random(200)
+    difficulty = 0.5 * complexity + 0.5 * rng.random(200)  # correlated, like real pools
+    cells = assign_grid(complexity, difficulty).cells
+    assert sorted(cells) == sorted(ALL_TASKS)
+    assert len(set(cells.values())) == 49
+    col_mean = [np.mean([complexity[cells[t]] for t in ALL_TASKS if t[1] == d]) for d in "0123456"]
+    assert np.all(np.diff(col_mean) > 0)
+    for digit in "0123456":
+        column = [difficulty[cells[letter + digit]] for letter in "ABCDEFG"]
+        assert np.all(np.diff(column) > 0)
+    with pytest.raises(GridAssignmentError):
+        assign_grid(complexity[:40], difficulty[:40])
+
+
+def test_candidates_are_deterministic() -> None:
+    first = sample_candidates(seed=7, candidates=4, config=FAST)
+    again = sample_candidates(seed=7, candidates=4, config=FAST)
+    other = sample_candidates(seed=8, candidates=4, config=FAST)
+    assert first == again
+    assert first != other
+
+
+@pytest.fixture(scope="module")
+def small_set(tmp_path_factory: pytest.TempPathFactory) -> tuple[Path, ObjectSetMetadata]:
+    out = tmp_path_factory.mktemp("generated")
+    metadata = generate_object_set(out, seed=3, candidates=70, config=FAST, tasks=["A0", "G6"])
+    return out, metadata
+
+
+def test_generate_object_set_writes_layout(small_set: tuple[Path, ObjectSetMetadata]) -> None:
+    out, metadata = small_set
+    assert set(metadata.objects) == {"A0", "G6"}
+    for task in ("A0", "G6"):
+        for name in ("model.urdf", "visual.obj", "collision.obj"):
+            assert (out / task / name).is_file()
+    assert (out / "contact_sheet.png").stat().st_size > 1000
+    loaded = ObjectSetMetadata.load(out)
+    assert loaded == metadata
+    a0, g6 = metadata.objects["A0"], metadata.objects["G6"]
+    assert a0.complexity < g6.complexity and a0.difficulty < g6.difficulty
+    assert a0.scripted_grasp_success is None and a0.generator_params is not None
+    # Rebuilding a chosen candidate from its seed reproduces its stored parameters.
+    params, _ = candidate_mesh(3, a0.candidate_index, FAST)
+    assert params.to_dict() == a0.generator_params
+
+
+def test_import_egad_builds_same_layout(tmp_path: Path) -> None:
+    src = tmp_path / "egad"
+    src.mkdir()
+    for task, index in (("A0", 0), ("C3", 1)):
+        _, mesh = candidate_mesh(11, index, FAST)
+        mesh.apply_scale(1000.0)  # EGAD ships meshes in millimetres
+        mesh.export(src / f"{task}.obj")
+    with pytest.raises(MissingEgadFilesError):
+        import_egad(src, tmp_path / "out", config=FAST)
+    metadata = import_egad(src, tmp_path / "out", config=FAST, require_all=False, contact_sheet=False)
+    assert set(metadata.objects) == {"A0", "C3"}
+    for obj in metadata.objects.values():
+        assert obj.source == "egad" and obj.source_file == f"{obj.task}.obj"
+        assert max(obj.extents) <= GRIPPER_WIDTH + TOL
+        assert (tmp_path / "out" / obj.task / "model.urdf").is_file()
+    assert ObjectSetMetadata.load(tmp_path / "out").source == "egad"
+
+
+def test_record_scripted_grasp_success(small_set: tuple[Path, ObjectSetMetadata], tmp_path: Path) -> None:
+    out, _ = small_set
+    shutil.copy(out / "objects.json", tmp_path / "objects.json")
+    updated = record_scripted_grasp_success(tmp_path, {"A0": 0.9})
+    assert updated.objects["A0"].scripted_grasp_success == 0.9
+    assert updated.objects["G6"].scripted_grasp_success is None
+    with pytest.raises(KeyError):
+        record_scripted_grasp_success(tmp_path, {"B1": 1.0})
+
+
+# --- the committed set under assets/objects ---------------------------------
+
+
+def _obj_vertices(path: Path) -> np.ndarray:
+    with open(path) as f:
+        return np.array([[float(v) for v in line.split()[1:4]] for line in f if line.startswith("v ")])
+
+
+@pytest.fixture(scope="module")
+def committed() -> ObjectSetMetadata:
+    return ObjectSetMetadata.load(ASSETS)
+
+
+def test_committed_set_is_complete_and_small(committed: ObjectSetMetadata) -> None:
+    assert sorted(committed.objects) == sorted(ALL_TASKS)
+    total = sum(f.stat().st_size for f in ASSETS.rglob("*") if f.is_file())
+    assert total < 8 * 1024 * 1024
+    assert (ASSETS / "contact_sheet.png").is_file()
+    raw = json.loads((ASSETS / "objects.json").read_text())
+    assert raw["generator_version"] and raw["seed"] is not None
+
+
+def test_committed_grid_follows_metrics(committed: ObjectSetMetadata) -> None:
+    edges = committed.binning["complexity_edges"]
+    for task, obj in committed.objects.items():
+        difficulty_row, complexity_col = grid_coordinates(task)
+        assert np.searchsorted(edges, obj.complexity, side="right") == complexity_col
+        if difficulty_row > 0:
+            easier = committed.objects["ABCDEFG"[difficulty_row - 1] + task[1]]
+            assert easier.difficulty <= obj.difficulty
+        assert 0.0 < obj.difficulty <= 1.0
+        assert 0.05 <= obj.mass <= 0.15
+        assert obj.visual_faces <= 1500 and 1 <= obj.hull_count <= 8
+
+
+def test_committed_urdfs_load_rest_and_fit_gripper(committed: ObjectSetMetadata) -> None:
+    client = p.connect(p.DIRECT)
+    try:
+        p.setGravity(0, 0, -9.81, physicsClientId=client)
+        plane = p.createCollisionShape(p.GEOM_PLANE, physicsClientId=client)
+        p.createMultiBody(0, plane, physicsClientId=client)
+        rng = np.random.default_rng(0)
+        for task, obj in committed.objects.items():
+            body = p.loadURDF(
+                str(ASSETS / task / "model.urdf"),
+                basePosition=(0, 0, 0.1),
+                flags=p.URDF_USE_INERTIA_FROM_FILE,
+                physicsClientId=client,
+            )
+            # pybullet's AABB includes contact margins, so measure the hulls themselves;
+            # they may exceed the visual mesh by about a V-HACD voxel.
+            extents = np.sort(np.ptp(_obj_vertices(ASSETS / task / "collision.obj"), axis=0))[::-1]
+            assert extents[0] <= GRIPPER_WIDTH + 0.004, task
+            assert extents[2] <= GRIPPER_FIT_FRACTION * GRIPPER_WIDTH + 0.004, task
+            assert max(obj.extents) <= GRIPPER_WIDTH + 1e-6, task
+            assert min(obj.extents) <= GRIPPER_FIT_FRACTION * GRIPPER_WIDTH + 1e-6, task
+            info = p.getDynamicsInfo(body, -1, physicsClientId=client)
+            assert info[0] == pytest.approx(obj.mass, rel=1e-5)
+            principal = np.linalg.eigvalsh(np.asarray(obj.inertia))
+            assert np.sort(info[2]) == pytest.approx(principal, rel=1e-3), task
+            orientation = p.getQuaternionFromEuler(rng.uniform(-np.pi, np.pi, 3))
+            p.resetBasePositionAndOrientation(body, (0, 0, 0.1), orientation, physicsClientId=client)
+            for _ in range(720):
+                p.stepSimulation(physicsClientId=client)
+            linear, angular = p.getBaseVelocity(body, physicsClientId=client)
+            position, _ = p.getBasePositionAndOrientation(body, physicsClientId=client)
+            assert np.linalg.norm(linear) < 0.01 and np.linalg.norm(angular) < 0.1, task
+            assert 0.0 < position[2] < 0.06, task
+            p.removeBody(body, physicsClientId=client)
+    finally:
+        p.disconnect(client)
