@@ -12,7 +12,8 @@ import os
 import sys
 from pathlib import Path
 
-from glocal_ros.tasks import parse_task_list
+from glocal_ros.paths import objects_dir
+from glocal_ros.tasks import parse_task_list, sorted_tasks
 
 PACKAGE = "glocal_ros"
 NODES = ("sim_node", "learner_node", "curriculum_node", "recorder_node")
@@ -59,6 +60,70 @@ def cmd_launch(args: argparse.Namespace) -> int:
     return launch(args.strategy, args.preset, args.seed, args.out)
 
 
+def cmd_assets_generate(args: argparse.Namespace) -> int:
+    from glocal_ros.objects import generate_object_set
+
+    def progress(stage: str, done: int, total: int) -> None:
+        if done == total or done % max(1, total // 20) == 0:
+            print(f"{stage}: {done}/{total}", flush=True)
+
+    generate_object_set(args.out, seed=args.seed, candidates=args.candidates, workers=args.workers,
+                        progress=progress)
+    print(f"wrote {args.out}")
+    return cmd_assets_check(args) if args.check_episodes else 0
+
+
+def cmd_assets_import_egad(args: argparse.Namespace) -> int:
+    from glocal_ros.objects import import_egad
+
+    import_egad(args.egad_dir, args.out, require_all=not args.partial)
+    print(f"wrote {args.out}")
+    return cmd_assets_check(args) if args.check_episodes else 0
+
+
+def cmd_assets_check(args: argparse.Namespace) -> int:
+    """The scripted grasp on every object; rates stored in objects.json."""
+    from glocal_ros.objects import ObjectSetMetadata, record_scripted_grasp_success
+    from sim_node.scripted_grasp import graspability
+
+    tasks = sorted_tasks(ObjectSetMetadata.load(args.out).objects)
+    rates = graspability(args.out, tasks, args.check_episodes, seed=args.seed,
+                         progress=lambda task, rate: print(f"{task}: scripted grasp {rate:.0%}", flush=True))
+    record_scripted_grasp_success(args.out, rates)
+    never = [task for task, rate in rates.items() if rate == 0]
+    print(f"scripted grasp: mean {sum(rates.values()) / len(rates):.0%}, lowest "
+          f"{min(rates.values()):.0%}; never grasped: {', '.join(never) or 'none'}")
+    return 1 if never else 0
+
+
+def cmd_assets_show(args: argparse.Namespace) -> int:
+    from glocal_ros.objects import ObjectSetMetadata
+
+    metadata = ObjectSetMetadata.load(args.out)
+    print(f"{'task':4} {'complexity':>10} {'difficulty':>10} {'extents (cm)':>18} {'mass (g)':>8} {'hulls':>5} "
+          f"{'scripted':>8}")
+    for task in sorted_tasks(metadata.objects):
+        obj = metadata.objects[task]
+        extents = "x".join(f"{100 * e:.1f}" for e in obj.extents)
+        scripted = "-" if obj.scripted_grasp_success is None else f"{obj.scripted_grasp_success:.0%}"
+        print(f"{task:4} {obj.complexity:10.2f} {obj.difficulty:10.3f} {extents:>18} {1000 * obj.mass:8.0f} "
+              f"{obj.hull_count:5d} {scripted:>8}")
+    return 0
+
+
+def cmd_bench_sim(args: argparse.Namespace) -> int:
+    from sim_node.bench import run_sim_bench, sim_bench_report
+
+    env_counts = [int(n) for n in args.envs.split(",")]
+    rows = run_sim_bench(env_counts, args.batches, args.rounds)
+    report = sim_bench_report(rows, "glocal-ros " + " ".join(sys.argv[1:]), args.batches, args.rounds)
+    args.out.parent.mkdir(parents=True, exist_ok=True)
+    args.out.write_text(report)
+    print(report, end="")
+    print(f"written to {args.out}")
+    return 0
+
+
 def build_parser() -> argparse.ArgumentParser:
     parser = argparse.ArgumentParser(prog="glocal-ros", description=__doc__.splitlines()[0])
     commands = parser.add_subparsers(dest="command", required=True)
@@ -77,6 +142,38 @@ def build_parser() -> argparse.ArgumentParser:
     evaluate.add_argument("--json", action="store_true", help="print one JSON object mapping task to score")
     evaluate.set_defaults(func=cmd_evaluate)
 
+    assets = commands.add_parser("assets", help="the object set: generate, import EGAD, check, show")
+    asset_commands = assets.add_subparsers(dest="assets_command", required=True)
+    generate = asset_commands.add_parser("generate", help="generate the 49 objects (seeded, about 6 minutes)")
+    generate.add_argument("--seed", type=int, default=0)
+    generate.add_argument("--candidates", type=int, default=1500, help="candidate shapes to bin into the grid")
+    generate.add_argument("--workers", type=int, default=2)
+    generate.set_defaults(func=cmd_assets_generate)
+    egad = asset_commands.add_parser("import-egad", help="the same layout from EGAD's A0.obj .. G6.obj")
+    egad.add_argument("egad_dir", type=Path)
+    egad.add_argument("--partial", action="store_true", help="import whichever of the 49 files exist")
+    egad.add_argument("--seed", type=int, default=0, help="seed of the scripted grasp check")
+    egad.set_defaults(func=cmd_assets_import_egad)
+    check = asset_commands.add_parser("check", help="scripted grasp success of every object, into objects.json")
+    check.add_argument("--seed", type=int, default=0)
+    check.set_defaults(func=cmd_assets_check)
+    show = asset_commands.add_parser("show", help="every object's metrics")
+    show.set_defaults(func=cmd_assets_show)
+    for command in (generate, egad, check, show):
+        command.add_argument("--out", type=Path, default=None, help="objects directory (default: the package's)")
+    for command in (generate, egad, check):
+        command.add_argument("--check-episodes", type=int, default=30,
+                             help="scripted grasp episodes per object (0: no check)")
+
+    bench = commands.add_parser("bench", help="benchmarks; each writes its table with the command that made it")
+    bench_commands = bench.add_subparsers(dest="bench_command", required=True)
+    bench_sim = bench_commands.add_parser("sim", help="env steps/s in-process vs through sim_node")
+    bench_sim.add_argument("--envs", default="1,2,4", help="comma-separated env counts N")
+    bench_sim.add_argument("--batches", type=int, default=500, help="lockstep batches per measurement")
+    bench_sim.add_argument("--rounds", type=int, default=3, help="alternating rounds; the median is reported")
+    bench_sim.add_argument("--out", type=Path, default=Path("bench/results/sim.md"))
+    bench_sim.set_defaults(func=cmd_bench_sim)
+
     launch = commands.add_parser("launch", help="run the whole graph as processes on an isolated ROS domain")
     launch.add_argument("--strategy", default="glocal")
     launch.add_argument("--preset", default="demo", help="a parameter file of assets/params: smoke, demo, paper")
@@ -89,6 +186,8 @@ def build_parser() -> argparse.ArgumentParser:
 def main(argv: list[str] | None = None) -> int:
     parser = build_parser()
     args = parser.parse_args(argv)
+    if args.command == "assets" and args.out is None:
+        args.out = objects_dir()
     try:
         return args.func(args)
     except ValueError as error:  # bad input (unknown task, ...): a message, not a traceback

@@ -87,7 +87,8 @@ class LearnerNode(Node):
 
 
 def main(args=None) -> int:
-    return spin_node(LearnerNode, args)
+    # Evaluate blocks on sim/step responses, which another thread must take.
+    return spin_node(LearnerNode, args, num_threads=4)
 
 
 if __name__ == "__main__":

@@ -22,14 +22,19 @@ from sim_node.batch import StepBatch
 
 
 class SimClient:
-    def __init__(self, node: Node, timeout_sec: float = 60.0):
+    def __init__(self, node: Node, timeout_sec: float = 60.0, namespace: str = ""):
+        """``namespace``: the sim node's, when it differs from ``node``'s (e.g. ``/robot1``)."""
         group = ReentrantCallbackGroup()
-        self._reset = node.create_client(ResetEnvs, names.SIM_RESET, callback_group=group)
-        self._step = node.create_client(StepEnvs, names.SIM_STEP, callback_group=group)
+        prefix = namespace.rstrip("/") + "/" if namespace else ""
+        self._reset = node.create_client(ResetEnvs, prefix + names.SIM_RESET, callback_group=group)
+        self._step = node.create_client(StepEnvs, prefix + names.SIM_STEP, callback_group=group)
         self.timeout_sec = timeout_sec
         self.num_envs = 0
         self.obs_dim = 0
         self.action_dim = 0
+
+    def ready(self) -> bool:
+        return self._reset.service_is_ready() and self._step.service_is_ready()
 
     def wait_for_sim(self, timeout_sec: float) -> None:
         """Wait for the sim node's services; sizes are known after the first reset."""

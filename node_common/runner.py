@@ -6,7 +6,7 @@ import os
 from typing import Callable, Sequence
 
 import rclpy
-from rclpy.executors import ExternalShutdownException, MultiThreadedExecutor
+from rclpy.executors import ExternalShutdownException, MultiThreadedExecutor, SingleThreadedExecutor
 from rclpy.node import Node
 from rclpy.signals import SignalHandlerOptions
 
@@ -21,33 +21,36 @@ def configure_discovery() -> None:
     os.environ.setdefault("ROS_AUTOMATIC_DISCOVERY_RANGE", DEFAULT_DISCOVERY_RANGE)
 
 
-def spin_node(make_node: Callable[[], Node], args: Sequence[str] | None = None, num_threads: int = 4) -> int:
+def spin_node(make_node: Callable[[], Node], args: Sequence[str] | None = None, num_threads: int = 1) -> int:
     """Create the node, spin it until SIGINT/SIGTERM, shut down cleanly.
 
-    Returns the process exit code: 0 on a requested shutdown, 1 when the node
-    failed (the error is logged through the node's logger when it exists) or
-    ended itself with a non-zero ``exit_code`` attribute.
+    ``num_threads`` > 1 spins a MultiThreadedExecutor, for nodes whose
+    callbacks block on other callbacks of theirs (a service that calls
+    services); one thread is cheaper per callback.
+
+    Returns the process exit code: 1 when the node failed (the error is
+    logged through the node's logger when it exists), else the node's own
+    ``exit_code`` attribute if it has one (a node that ends itself), else 0.
     """
     configure_discovery()
     rclpy.init(args=args, signal_handler_options=SignalHandlerOptions.ALL)
     node: Node | None = None
-    exit_code = 0
+    failed = False
     try:
         node = make_node()
-        executor = MultiThreadedExecutor(num_threads=num_threads)
+        executor = MultiThreadedExecutor(num_threads) if num_threads > 1 else SingleThreadedExecutor()
         executor.add_node(node)
         # A bounded wait instead of executor.spin(): the signal handler's wake-up
         # of a waiting MultiThreadedExecutor is sometimes lost, and the node then
         # never notices SIGTERM (seen here about once in three shutdowns).
         while node.context.ok():
             executor.spin_once(timeout_sec=SHUTDOWN_POLL_SEC)
-        exit_code = getattr(node, "exit_code", 0)
     except (KeyboardInterrupt, ExternalShutdownException):
         pass
     except Exception as error:  # noqa: BLE001 - the process must report any failure and exit non-zero
         logger = node.get_logger() if node is not None else rclpy.logging.get_logger("glocal_ros")
         logger.fatal(f"{type(error).__name__}: {error}")
-        exit_code = 1
+        failed = True
     finally:
         if node is not None:
             close = getattr(node, "close", None)
@@ -55,4 +58,4 @@ def spin_node(make_node: Callable[[], Node], args: Sequence[str] | None = None, 
                 close()
             node.destroy_node()
         rclpy.try_shutdown()
-    return exit_code
+    return 1 if failed else getattr(node, "exit_code", 0)

@@ -59,7 +59,7 @@ class RecorderNode(Node):
 
 
 def main(args=None) -> int:
-    return spin_node(RecorderNode, args, num_threads=2)
+    return spin_node(RecorderNode, args)
 
 
 if __name__ == "__main__":

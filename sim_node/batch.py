@@ -16,6 +16,7 @@ import numpy as np
 
 from glocal_ros.tasks import task_index
 from sim_node.episode import PHASE_EVAL, PHASE_TRAIN, UNSEEDED, EpisodeLog
+from sim_node.grasp_env import GraspState
 
 #: float32 rounding of a tanh-squashed action can overshoot 1 by an ulp or so.
 ACTION_TOLERANCE = 1e-5
@@ -34,7 +35,23 @@ class BatchEnv(Protocol):
 
     def joint_positions(self) -> np.ndarray: ...
 
+    def object_pose(self) -> tuple[np.ndarray, np.ndarray]: ...
+
+    def grasp_state(self) -> GraspState: ...
+
     def close(self) -> None: ...
+
+
+@dataclass
+class EnvSnapshot:
+    """One env's state for viewers."""
+
+    task: str
+    joint_positions: np.ndarray
+    object_position: np.ndarray
+    object_orientation: np.ndarray  # quaternion x, y, z, w
+    grasp: GraspState
+    lifted: bool  # lifted above the success height
 
 
 @dataclass
@@ -49,14 +66,79 @@ class StepBatch:
     finished: list[EpisodeLog]
 
 
-class BatchedEnvs:
-    """``num_envs`` envs made by ``make_env(index)``, all on task ``initial_task``."""
+def normalize_reset(
+    num_envs: int, env_indices: Sequence[int], tasks: Sequence[str], seeds: Sequence[int], phase: int
+) -> tuple[list[int], list[str | None], list[int]]:
+    """Check a reset request; one task (None = keep) and one seed per reset env, in reset order."""
+    indices = [int(i) for i in env_indices] if len(env_indices) else list(range(num_envs))
+    for index in indices:
+        if not 0 <= index < num_envs:
+            raise ValueError(f"env index {index} out of range: this sim has {num_envs} envs")
+    if len(set(indices)) != len(indices):
+        raise ValueError(f"env indices repeat: {indices}")
+    if len(seeds) == 1:
+        # One base seed for the batch, as Gymnasium's vector envs do: env k of the reset gets seed + k.
+        seeds = [int(seeds[0]) + k for k in range(len(indices))]
+    per_env_tasks = _per_env(list(tasks), len(indices), "tasks", default=None)
+    per_env_seeds = _per_env([int(s) for s in seeds], len(indices), "seeds", default=UNSEEDED)
+    for task in per_env_tasks:
+        if task is not None:
+            task_index(task)
+    _check_phase(phase)
+    return indices, per_env_tasks, per_env_seeds
 
-    def __init__(self, make_env: Callable[[int], BatchEnv], num_envs: int, initial_task: str = "A0"):
+
+def normalize_step(
+    num_envs: int, action_dim: int, actions: np.ndarray, next_tasks: Sequence[str], phase: int
+) -> tuple[np.ndarray, list[str]]:
+    """Check a step request; actions as ``(N, action_dim)`` in [-1, 1], one next task per env ("" = keep)."""
+    actions = np.asarray(actions, dtype=np.float32)
+    expected = num_envs * action_dim
+    if actions.size != expected:
+        raise ValueError(f"expected {expected} action values ({num_envs} envs x {action_dim}), got {actions.size}")
+    if not np.all(np.isfinite(actions)):
+        raise ValueError("actions contain NaN or inf")
+    if np.any(np.abs(actions) > 1.0 + ACTION_TOLERANCE):
+        raise ValueError("actions must lie in [-1, 1]")
+    if len(next_tasks) not in (0, num_envs):
+        raise ValueError(f"next_tasks must be empty or have {num_envs} entries, got {len(next_tasks)}")
+    for task in next_tasks:
+        if task:
+            task_index(task)
+    _check_phase(phase)
+    return np.clip(actions, -1.0, 1.0).reshape(num_envs, action_dim), list(next_tasks) or [""] * num_envs
+
+
+def _per_env(values: list, count: int, name: str, default) -> list:
+    if not values:
+        return [default] * count
+    if len(values) == 1:
+        return values * count
+    if len(values) != count:
+        raise ValueError(f"{name}: give one value, or one per reset env ({count}), not {len(values)}")
+    return values
+
+
+def _check_phase(phase: int) -> None:
+    if phase not in (PHASE_TRAIN, PHASE_EVAL):
+        raise ValueError(f"phase must be {PHASE_TRAIN} (train) or {PHASE_EVAL} (eval), got {phase}")
+
+
+class BatchedEnvs:
+    """``num_envs`` envs made by ``make_env(index)``, all on task ``initial_task``.
+
+    ``first_index`` numbers the envs from there in episode logs, for a batch
+    that is one worker's share of a larger one (``sim_node.parallel``).
+    """
+
+    def __init__(
+        self, make_env: Callable[[int], BatchEnv], num_envs: int, initial_task: str = "A0", first_index: int = 0
+    ):
         if num_envs < 1:
             raise ValueError(f"num_envs must be at least 1, got {num_envs}")
         task_index(initial_task)
-        self.envs = [make_env(i) for i in range(num_envs)]
+        self.first_index = first_index
+        self.envs = [make_env(first_index + i) for i in range(num_envs)]
         self.obs_dim = int(np.prod(self.envs[0].observation_space.shape))
         self.action_dim = int(np.prod(self.envs[0].action_space.shape))
         self.tasks = [initial_task] * num_envs
@@ -87,33 +169,8 @@ class BatchedEnvs:
         An episode interrupted by a reset is returned too (``interrupted``),
         so that every step an env took is in the record.
         """
-        indices = list(env_indices) if len(env_indices) else list(range(self.num_envs))
-        for index in indices:
-            if not 0 <= index < self.num_envs:
-                raise ValueError(f"env index {index} out of range: this sim has {self.num_envs} envs")
-        if len(set(indices)) != len(indices):
-            raise ValueError(f"env indices repeat: {indices}")
-        new_tasks = self._per_env(list(tasks), indices, "tasks", default=None)
-        if len(seeds) == 1:
-            # One base seed for the batch, as Gymnasium's vector envs do: env k of the reset gets seed + k.
-            seeds = [int(seeds[0]) + k for k in range(len(indices))]
-        new_seeds = self._per_env([int(s) for s in seeds], indices, "seeds", default=UNSEEDED)
-        for task in new_tasks:
-            if task is not None:
-                task_index(task)
-        self._check_phase(phase)
-
-        interrupted = []
-        observations = np.empty((len(indices), self.obs_dim), dtype=np.float32)
-        for row, (index, task, seed) in enumerate(zip(indices, new_tasks, new_seeds)):
-            log = self._logs[index]
-            if log.length > 0:
-                log.interrupted = True
-                interrupted.append(log)
-            if task is not None:
-                self.tasks[index] = task
-            observations[row] = self._begin_episode(index, seed, phase, policy_name)
-        return observations, interrupted
+        indices, per_env_tasks, per_env_seeds = normalize_reset(self.num_envs, env_indices, tasks, seeds, phase)
+        return self.apply_reset(indices, per_env_tasks, per_env_seeds, phase, policy_name)
 
     def step(
         self,
@@ -124,24 +181,29 @@ class BatchedEnvs:
         global_step: int = 0,
     ) -> StepBatch:
         """Step every env once with its row of ``actions`` (shape ``(N, action_dim)`` or flat)."""
-        actions = np.asarray(actions, dtype=np.float32)
-        expected = self.num_envs * self.action_dim
-        if actions.size != expected:
-            raise ValueError(
-                f"expected {expected} action values ({self.num_envs} envs x {self.action_dim}), got {actions.size}"
-            )
-        if not np.all(np.isfinite(actions)):
-            raise ValueError("actions contain NaN or inf")
-        if np.any(np.abs(actions) > 1.0 + ACTION_TOLERANCE):
-            raise ValueError("actions must lie in [-1, 1]")
-        actions = np.clip(actions, -1.0, 1.0).reshape(self.num_envs, self.action_dim)
-        if len(next_tasks) not in (0, self.num_envs):
-            raise ValueError(f"next_tasks must be empty or have {self.num_envs} entries, got {len(next_tasks)}")
-        for task in next_tasks:
-            if task:
-                task_index(task)
-        self._check_phase(phase)
+        actions, next_tasks = normalize_step(self.num_envs, self.action_dim, actions, next_tasks, phase)
+        return self.apply_step(actions, next_tasks, phase, policy_name, global_step)
 
+    def apply_reset(
+        self, indices: list[int], tasks: list[str | None], seeds: list[int], phase: int, policy_name: str
+    ) -> tuple[np.ndarray, list[EpisodeLog]]:
+        """``reset`` of a request already checked by ``normalize_reset``."""
+        interrupted = []
+        observations = np.empty((len(indices), self.obs_dim), dtype=np.float32)
+        for row, (index, task, seed) in enumerate(zip(indices, tasks, seeds)):
+            log = self._logs[index]
+            if log.length > 0:
+                log.interrupted = True
+                interrupted.append(log)
+            if task is not None:
+                self.tasks[index] = task
+            observations[row] = self._begin_episode(index, seed, phase, policy_name)
+        return observations, interrupted
+
+    def apply_step(
+        self, actions: np.ndarray, next_tasks: list[str], phase: int, policy_name: str, global_step: int
+    ) -> StepBatch:
+        """``step`` of a request already checked by ``normalize_step``."""
         observations = np.empty((self.num_envs, self.obs_dim), dtype=np.float32)
         terminal = np.zeros((self.num_envs, self.obs_dim), dtype=np.float32)
         rewards = np.empty(self.num_envs, dtype=np.float32)
@@ -160,11 +222,18 @@ class BatchedEnvs:
                 log.success, log.truncated, log.global_step = bool(is_success[i]), bool(trunc and not term), global_step
                 finished.append(log)
                 terminal[i] = obs
-                if next_tasks and next_tasks[i]:
+                if next_tasks[i]:
                     self.tasks[i] = next_tasks[i]
                 obs = self._begin_episode(i, UNSEEDED, phase, policy_name)
             observations[i] = obs
         return StepBatch(observations, rewards, terminated, truncated, is_success, terminal, list(self.tasks), finished)
+
+    def snapshot(self, index: int) -> EnvSnapshot:
+        env = self.envs[index].unwrapped
+        position, orientation = env.object_pose()
+        grasp = env.grasp_state()
+        return EnvSnapshot(self.tasks[index], env.joint_positions(), position, orientation, grasp,
+                           grasp.object_lift > env.config.success_height)
 
     def close(self) -> None:
         for env in self.envs:
@@ -174,21 +243,7 @@ class BatchedEnvs:
         env = self.envs[index]
         obs, _ = env.reset(seed=None if seed == UNSEEDED else seed, options={"task": self.tasks[index]})
         obs = np.asarray(obs, dtype=np.float32)
-        log = EpisodeLog(self.tasks[index], index, seed, phase, policy_name)
+        log = EpisodeLog(self.tasks[index], self.first_index + index, seed, phase, policy_name)
         log.start(obs, env.joint_positions())
         self._logs[index] = log
         return obs
-
-    def _per_env(self, values: list, indices: list[int], name: str, default):
-        if not values:
-            return [default] * len(indices)
-        if len(values) == 1:
-            return values * len(indices)
-        if len(values) != len(indices):
-            raise ValueError(f"{name}: give one value, or one per reset env ({len(indices)}), not {len(values)}")
-        return values
-
-    @staticmethod
-    def _check_phase(phase: int) -> None:
-        if phase not in (PHASE_TRAIN, PHASE_EVAL):
-            raise ValueError(f"phase must be {PHASE_TRAIN} (train) or {PHASE_EVAL} (eval), got {phase}")

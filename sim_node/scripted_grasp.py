@@ -9,6 +9,8 @@ replay buffer.
 from __future__ import annotations
 
 import enum
+from pathlib import Path
+from typing import Callable, Sequence
 
 import gymnasium as gym
 import numpy as np
@@ -154,3 +156,20 @@ def scripted_success_rate(env: gym.Env, task: str, episodes: int, seed: int | No
                 successes += bool(info["is_success"])
                 break
     return successes / episodes
+
+
+def graspability(
+    objects_dir: Path, tasks: Sequence[str], episodes: int, seed: int = 0,
+    progress: Callable[[str, float], None] | None = None,
+) -> dict[str, float]:
+    """Scripted success rate of every task's object, one env reused for all (seeded per task)."""
+    env = GraspEnv(tasks[0], objects_dir=objects_dir)
+    try:
+        rates = {}
+        for offset, task in enumerate(tasks):
+            rates[task] = scripted_success_rate(env, task, episodes, seed=seed + offset)
+            if progress is not None:
+                progress(task, rates[task])
+        return rates
+    finally:
+        env.close()

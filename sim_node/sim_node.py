@@ -9,6 +9,8 @@ throttled and best effort, ``joint_states``, ``glocal/object_pose`` and
 
 from __future__ import annotations
 
+import os
+
 from geometry_msgs.msg import PoseStamped
 from glocal_interfaces.msg import EpisodeRecord, GraspState
 from glocal_interfaces.srv import ResetEnvs, StepEnvs
@@ -23,6 +25,7 @@ from node_common.params import declare
 from node_common.runner import spin_node
 from node_common.services import answers_errors
 from sim_node.batch import BatchedEnvs
+from sim_node.parallel import ProcessBatchedEnvs
 from sim_node.episode import EpisodeLog
 from sim_node.grasp_env import GraspEnv, GraspEnvConfig
 
@@ -45,13 +48,18 @@ class SimNode(Node):
         if self.viewer_env >= num_envs:
             raise ValueError(f"viewer_env {self.viewer_env} must be below num_envs {num_envs}")
 
+        workers = declare(self, "workers", 0, "processes stepping the envs in parallel; 0: one per CPU core, "
+                          "at most num_envs; 1: all envs in this process", min_value=0, max_value=256)
+        workers = min(num_envs, workers or os.cpu_count() or 1)
         config = GraspEnvConfig(max_steps=max_steps)
         objects = objects or str(objects_dir())
-        self.batch = BatchedEnvs(
-            lambda i: GraspEnv(initial_task, objects, config, render_mode="human" if gui and i == 0 else None),
-            num_envs,
-            initial_task,
-        )
+        if workers > 1:
+            self.batch = ProcessBatchedEnvs(num_envs, workers, initial_task, objects, config, gui)
+        else:
+            self.batch = BatchedEnvs(
+                lambda i: GraspEnv(initial_task, objects, config, render_mode="human" if gui and i == 0 else None),
+                num_envs, initial_task,
+            )
         self.episode_seq = 0
 
         # pybullet clients are not thread-safe: one group serialises every env access.
@@ -65,7 +73,8 @@ class SimNode(Node):
         if viewer_rate > 0:
             self.create_timer(1.0 / viewer_rate, self.publish_viewer_state, callback_group=sim_group)
         self.get_logger().info(
-            f"{num_envs} envs on task {initial_task}, obs {self.batch.obs_dim}, action {self.batch.action_dim}"
+            f"{num_envs} envs in {workers} process{'es' if workers > 1 else ''} on task {initial_task}, "
+            f"obs {self.batch.obs_dim}, action {self.batch.action_dim}"
         )
 
     @answers_errors("reset")
@@ -121,32 +130,28 @@ class SimNode(Node):
         return record
 
     def publish_viewer_state(self) -> None:
-        env = self.batch.envs[self.viewer_env].unwrapped
+        snapshot = self.batch.snapshot(self.viewer_env)
         stamp = self.get_clock().now().to_msg()
         joints = JointState()
         joints.header.stamp = stamp
         joints.name = self.batch.joint_names
-        joints.position = env.joint_positions().astype(float).tolist()
+        joints.position = snapshot.joint_positions.astype(float).tolist()
         self.joint_pub.publish(joints)
 
-        position, orientation = env.object_pose()
         pose = PoseStamped()
         pose.header.stamp, pose.header.frame_id = stamp, WORLD_FRAME
-        pose.pose.position.x, pose.pose.position.y, pose.pose.position.z = (float(v) for v in position)
+        pose.pose.position.x, pose.pose.position.y, pose.pose.position.z = (float(v) for v in snapshot.object_position)
         (pose.pose.orientation.x, pose.pose.orientation.y,
-         pose.pose.orientation.z, pose.pose.orientation.w) = (float(v) for v in orientation)
+         pose.pose.orientation.z, pose.pose.orientation.w) = (float(v) for v in snapshot.object_orientation)
         self.pose_pub.publish(pose)
 
-        grasp = env.grasp_state()
-        state = GraspState()
-        state.header.stamp = stamp
-        state.env_index = self.viewer_env
-        state.task = self.batch.tasks[self.viewer_env]
-        state.step = grasp.step
-        state.left_finger_contact, state.right_finger_contact = grasp.left_contact, grasp.right_contact
-        state.gripper_opening, state.object_lift = float(grasp.gripper_opening), float(grasp.object_lift)
-        state.success = grasp.object_lift > env.config.success_height
-        self.grasp_pub.publish(state)
+        grasp = snapshot.grasp
+        self.grasp_pub.publish(GraspState(
+            header=pose.header, env_index=self.viewer_env, task=snapshot.task, step=grasp.step,
+            left_finger_contact=grasp.left_contact, right_finger_contact=grasp.right_contact,
+            gripper_opening=float(grasp.gripper_opening), object_lift=float(grasp.object_lift),
+            success=snapshot.lifted,
+        ))
 
     def close(self) -> None:
         self.batch.close()

@@ -1,0 +1,59 @@
+"""ProcessBatchedEnvs: the same batch, stepped by worker processes."""
+
+import numpy as np
+import pytest
+
+from glocal_ros.paths import objects_dir
+from glocal_ros.tasks import UnknownTaskError
+from sim_node.batch import BatchedEnvs
+from sim_node.grasp_env import GraspEnv, GraspEnvConfig
+from sim_node.parallel import ProcessBatchedEnvs, split
+
+T = 3
+CONFIG = GraspEnvConfig(max_steps=T)
+
+
+def test_split_is_even_and_consecutive():
+    assert split(5, 2) == [range(0, 2), range(2, 5)]
+    assert split(2, 4) == [range(0, 1), range(1, 2)]
+    assert sum(len(r) for r in split(7, 3)) == 7
+
+
+@pytest.fixture(scope="module")
+def batches():
+    parallel = ProcessBatchedEnvs(3, 2, "A0", str(objects_dir()), CONFIG)
+    serial = BatchedEnvs(lambda i: GraspEnv("A0", config=CONFIG), 3)
+    yield parallel, serial
+    parallel.close()
+    serial.close()
+
+
+def test_workers_match_one_process_step_for_step(batches):
+    parallel, serial = batches
+    rng = np.random.default_rng(0)
+    first = [b.reset(tasks=["A0", "B1", "C2"], seeds=[5])[0] for b in batches]
+    np.testing.assert_array_equal(first[0], first[1])
+    for k in range(2 * T):
+        actions = rng.uniform(-1, 1, (3, 5)).astype(np.float32)
+        results = [b.step(actions, next_tasks=["D3", "", ""], global_step=k) for b in batches]
+        np.testing.assert_array_equal(results[0].observations, results[1].observations)
+        np.testing.assert_array_equal(results[0].terminal_observations, results[1].terminal_observations)
+        assert results[0].tasks == results[1].tasks
+        assert [(log.env_index, log.task, log.length) for log in results[0].finished] == \
+               [(log.env_index, log.task, log.length) for log in results[1].finished]
+    assert parallel.tasks == ["D3", "B1", "C2"]
+    assert parallel.snapshot(2).task == "C2"
+
+
+def test_partial_reset_and_bad_requests(batches):
+    parallel, _ = batches
+    parallel.step(np.zeros((3, 5), dtype=np.float32))
+    observations, interrupted = parallel.reset(env_indices=[2, 0], tasks=["E4", "A1"])
+    assert observations.shape == (2, 63)
+    assert sorted(log.env_index for log in interrupted) == [0, 2]
+    assert parallel.tasks[0] == "A1" and parallel.tasks[2] == "E4"
+    with pytest.raises(UnknownTaskError):
+        parallel.reset(tasks=["A9"])
+    with pytest.raises(ValueError, match="NaN"):
+        parallel.step(np.full((3, 5), np.nan, dtype=np.float32))
+    assert parallel.step(np.zeros((3, 5), dtype=np.float32)).observations.shape == (3, 63)
