@@ -41,7 +41,7 @@ class CurriculumNode(Node):
         if self.strategy not in IMPLEMENTED_STRATEGIES:
             raise ValueError(f"strategy {self.strategy!r} is not implemented yet (issue 'Curriculum')")
         self.tasks = parse_task_list(declare(self, "tasks", "all", "tasks of the run: 'all' or e.g. 'A0,A1,B0'"))
-        self.initial_policy = declare(self, "initial_policy", "random", "pi_init, the policy every strategy starts from")
+        self.initial_policy = declare(self, "initial_policy", "prior", "pi_init, the policy every strategy starts from")
         self.eval_episodes = declare(self, "eval_episodes", 100, "S-bar: evaluation episodes per task",
                                      min_value=1, max_value=100_000)
         self.k_min = declare(self, "k_min", 2, "fewest k-means clusters tried", min_value=2, max_value=49)

@@ -12,7 +12,7 @@ import os
 import sys
 from pathlib import Path
 
-from glocal_ros.paths import objects_dir
+from glocal_ros.paths import assets_dir, objects_dir
 from glocal_ros.tasks import parse_task_list, sorted_tasks
 
 PACKAGE = "glocal_ros"
@@ -124,6 +124,44 @@ def cmd_bench_sim(args: argparse.Namespace) -> int:
     return 0
 
 
+def cmd_train_prior(args: argparse.Namespace) -> int:
+    """Train the A0 prior in-process, evaluate it, store it as `prior` in assets/priors."""
+    from tqdm import tqdm
+
+    from learner_node.evaluation import evaluate
+    from learner_node.policy_store import PolicyRecord, PolicyStore
+    from learner_node.prior import PriorConfig, train_prior
+    from sim_node.batch import BatchedEnvs
+    from sim_node.grasp_env import GraspEnv
+    from sim_node.scripted_grasp import ScriptedGraspPolicy
+
+    config = PriorConfig(max_steps=args.steps, seed=args.seed)
+    bar = tqdm(total=config.max_steps, unit="step", desc="A0 prior")
+
+    def progress(steps: int, success_rate: float) -> None:
+        bar.n = steps
+        if steps % 250 == 0:
+            bar.set_postfix(success=f"{success_rate:.0%}")
+            bar.refresh()
+
+    model = train_prior(lambda: GraspEnv(config.task), ScriptedGraspPolicy().act, args.work_dir, config, progress)
+    bar.close()
+    batch = BatchedEnvs(lambda i: GraspEnv(config.task), 2, config.task)
+    try:
+        (score,) = evaluate(batch, lambda obs: model.predict(obs, deterministic=True)[0], [config.task],
+                            args.eval_episodes, policy_name="prior", seed=args.seed + 1)
+    finally:
+        batch.close()
+    print(f"prior: {score.successes}/{score.episodes} on {config.task} after {model.num_timesteps} steps")
+    record = PolicyRecord(name="prior", task=config.task, steps_trained=model.num_timesteps,
+                          last_score=float(score.successes), last_score_task=config.task,
+                          extra={"eval_episodes": score.episodes, "demo_episodes": config.demo_episodes,
+                                 "seed": config.seed})
+    PolicyStore(args.out).save(model, record)
+    print(f"stored in {args.out}/prior")
+    return 0 if score.successes > args.threshold else 1
+
+
 def build_parser() -> argparse.ArgumentParser:
     parser = argparse.ArgumentParser(prog="glocal-ros", description=__doc__.splitlines()[0])
     commands = parser.add_subparsers(dest="command", required=True)
@@ -174,6 +212,15 @@ def build_parser() -> argparse.ArgumentParser:
     bench_sim.add_argument("--out", type=Path, default=Path("bench/results/sim.md"))
     bench_sim.set_defaults(func=cmd_bench_sim)
 
+    prior = commands.add_parser("train-prior", help="train the A0 prior (resumable) and store it in assets/priors")
+    prior.add_argument("--steps", type=int, default=40_000, help="most SAC env steps")
+    prior.add_argument("--seed", type=int, default=0)
+    prior.add_argument("--eval-episodes", type=int, default=100)
+    prior.add_argument("--threshold", type=float, default=75, help="B: the prior must score above it")
+    prior.add_argument("--work-dir", type=Path, default=Path("build/prior"), help="checkpoints, for resuming")
+    prior.add_argument("--out", type=Path, default=None, help="policy store (default: assets/priors)")
+    prior.set_defaults(func=cmd_train_prior)
+
     launch = commands.add_parser("launch", help="run the whole graph as processes on an isolated ROS domain")
     launch.add_argument("--strategy", default="glocal")
     launch.add_argument("--preset", default="demo", help="a parameter file of assets/params: smoke, demo, paper")
@@ -188,6 +235,8 @@ def main(argv: list[str] | None = None) -> int:
     args = parser.parse_args(argv)
     if args.command == "assets" and args.out is None:
         args.out = objects_dir()
+    if args.command == "train-prior" and args.out is None:
+        args.out = assets_dir() / "priors"
     try:
         return args.func(args)
     except ValueError as error:  # bad input (unknown task, ...): a message, not a traceback

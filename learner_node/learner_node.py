@@ -5,22 +5,29 @@ Services: ``learner/evaluate`` (glocal_interfaces/srv/Evaluate),
 scores, for the record). The learner never imports pybullet: it acts through
 the sim node's batched ``sim/reset`` and ``sim/step``.
 
-Issue "Learner" adds SAC training (the ``learner/train`` action), the policy
-store on disk and ``learner/copy_policy``.
+Policies: ``random``, the learner's policy store (``policy_dir``) and the
+shipped A0 ``prior``. Issue "Learner" adds SAC training (the
+``learner/train`` action) and ``learner/copy_policy``.
 """
 
 from __future__ import annotations
 
+import os
 import threading
+from datetime import datetime
+from pathlib import Path
 
+from builtin_interfaces.msg import Time
 from glocal_interfaces.msg import EvaluationResult, PolicyInfo, TaskScore
 from glocal_interfaces.srv import Evaluate, ListPolicies
 from rclpy.callback_groups import MutuallyExclusiveCallbackGroup
 from rclpy.node import Node
 
+from glocal_ros.paths import assets_dir
 from glocal_ros.tasks import validate_tasks
 from learner_node.evaluation import evaluate
 from learner_node.policies import PolicyRegistry
+from learner_node.policy_store import PolicyStore
 from learner_node.sim_client import SimClient
 from node_common import names, qos
 from node_common.params import declare
@@ -38,8 +45,9 @@ class LearnerNode(Node):
         self.sim_timeout = declare(self, "sim_timeout_sec", 30.0, "how long to wait for the sim node's services",
                                    min_value=0.1, max_value=3600.0)
         seed = declare(self, "seed", 0, "seed of the learner's random streams", min_value=0, max_value=2**31 - 1)
+        policy_dir = declare(self, "policy_dir", str(default_policy_dir()), "the learner's policy store")
 
-        self.policies = PolicyRegistry(seed)
+        self.policies = PolicyRegistry(PolicyStore(Path(policy_dir)), [PolicyStore(assets_dir() / "priors")], seed)
         self.sim = SimClient(self, timeout_sec=self.sim_timeout)
         # One request at a time drives the sim's envs.
         self.sim_lock = threading.Lock()
@@ -70,6 +78,8 @@ class LearnerNode(Node):
             )
         response.scores = [TaskScore(task=s.task, successes=s.successes, episodes=s.episodes) for s in scores]
         response.success = True
+        if len(scores) == 1:
+            self.policies.record_score(request.policy, scores[0].task, scores[0].successes)
         self._publish_evaluation(request.policy, response.scores, "request")
         self.get_logger().info(
             f"evaluated {request.policy}: " + ", ".join(f"{s.task} {s.successes}/{s.episodes}" for s in scores)
@@ -77,13 +87,27 @@ class LearnerNode(Node):
         return response
 
     def on_list_policies(self, request: ListPolicies.Request, response: ListPolicies.Response):
-        response.policies = [PolicyInfo(name=name, last_score=-1.0) for name in self.policies.names()]
+        response.policies = [
+            PolicyInfo(name=r.name, task=r.task, parent=r.parent, steps_trained=r.steps_trained,
+                       last_score=r.last_score, last_score_task=r.last_score_task,
+                       updated=Time(sec=_epoch_seconds(r.updated)))
+            for r in self.policies.records()
+        ]
         return response
 
     def _publish_evaluation(self, policy: str, scores: list[TaskScore], purpose: str) -> None:
         result = EvaluationResult(policy=policy, learner_steps=self.learner_steps, purpose=purpose, scores=scores)
         result.header.stamp = self.get_clock().now().to_msg()
         self.evaluations_pub.publish(result)
+
+
+def default_policy_dir() -> Path:
+    """``$ROS_HOME/glocal_ros/policies`` (ROS_HOME defaults to ~/.ros)."""
+    return Path(os.environ.get("ROS_HOME", Path.home() / ".ros")) / "glocal_ros" / "policies"
+
+
+def _epoch_seconds(iso_time: str) -> int:
+    return int(datetime.fromisoformat(iso_time).timestamp())
 
 
 def main(args=None) -> int:

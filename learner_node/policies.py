@@ -1,35 +1,67 @@
 """Policies the learner can act with, by name.
 
-Issue "Learner" adds the SAC policy store (named stable-baselines3 policies on
-disk); until then the learner knows one built-in policy, ``random``: uniform
-random actions, the chance level every learned policy must beat.
+Names resolve, in order, to the built-in ``random`` (uniform random actions,
+the chance level every learned policy must beat), the learner's own policy
+store, then the read-only stores shipped with the package (``assets/priors``:
+the A0 ``prior``). Stored policies are stable-baselines3 SAC models acting
+deterministically; loaded models are cached until their file changes.
 """
 
 from __future__ import annotations
+
+from pathlib import Path
+from typing import Sequence
 
 import numpy as np
 
 from glocal_ros.spaces import ACTION_DIM
 from learner_node.evaluation import BatchPolicy
+from learner_node.policy_store import PolicyRecord, PolicyStore, UnknownPolicyError, check_name
 
 RANDOM_POLICY = "random"
 
 
-class UnknownPolicyError(KeyError):
-    def __str__(self) -> str:
-        return f"unknown policy {self.args[0]!r}"
-
-
 class PolicyRegistry:
-    def __init__(self, seed: int | None = None):
+    def __init__(self, store: PolicyStore, read_only: Sequence[PolicyStore] = (), seed: int | None = None):
+        self.store = store
+        self.read_only = list(read_only)
         self._rng = np.random.default_rng(seed)
+        self._models: dict[Path, object] = {}
 
     def names(self) -> list[str]:
-        return [RANDOM_POLICY]
+        names = {RANDOM_POLICY, *self.store.names()}
+        for store in self.read_only:
+            names.update(store.names())
+        return sorted(names)
+
+    def records(self) -> list[PolicyRecord]:
+        return [self.record(name) for name in self.names()]
+
+    def record(self, name: str) -> PolicyRecord:
+        if name == RANDOM_POLICY:
+            return PolicyRecord(name=RANDOM_POLICY)
+        return self._store_of(name).record(name)
 
     def load(self, name: str) -> BatchPolicy:
-        if name != RANDOM_POLICY:
-            raise UnknownPolicyError(name)
-        return lambda observations: self._rng.uniform(
-            -1.0, 1.0, size=(len(observations), ACTION_DIM)
-        ).astype(np.float32)
+        if name == RANDOM_POLICY:
+            return lambda observations: self._rng.uniform(
+                -1.0, 1.0, size=(len(observations), ACTION_DIM)
+            ).astype(np.float32)
+        store = self._store_of(name)
+        path = store.model_path(name)
+        if path not in self._models:
+            self._models[path] = store.load(name)
+        model = self._models[path]
+        return lambda observations: model.predict(observations, deterministic=True)[0]
+
+    def record_score(self, name: str, task: str, successes: int) -> None:
+        """Remember the latest score of a policy of the learner's own store."""
+        if name in self.store:
+            self.store.update(name, last_score=float(successes), last_score_task=task)
+
+    def _store_of(self, name: str) -> PolicyStore:
+        check_name(name)
+        for store in (self.store, *self.read_only):
+            if name in store:
+                return store
+        raise UnknownPolicyError(name)

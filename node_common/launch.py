@@ -4,7 +4,8 @@ Starts recorder, sim and learner, waits until the recorder listens to the
 episode stream, then starts the curriculum and follows its state until the
 curriculum node ends. The other nodes are then stopped in reverse order with
 SIGINT, so the bag is closed cleanly; Ctrl-C does the same at any time.
-RUN_DIR gets ``bag/`` (a new ``bag.N/`` if one exists) and ``logs/``.
+RUN_DIR gets ``bag/`` (a new ``bag.N/`` if one exists), ``policies/`` (the
+learner's policy store) and ``logs/``.
 """
 
 from __future__ import annotations
@@ -76,7 +77,7 @@ def launch(strategy: str, preset: str, seed: int, run_dir: Path, startup_timeout
     try:
         start("recorder_node", output=str(bag))
         start("sim_node")
-        start("learner_node", seed=seed)
+        start("learner_node", seed=seed, policy_dir=str(run_dir / "policies"))
         deadline = time.monotonic() + startup_timeout
         while node.count_subscribers("/" + names.EPISODES) < 1 or node.count_publishers("/" + names.EPISODES) < 1:
             rclpy.spin_once(node, timeout_sec=0.1)

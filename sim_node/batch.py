@@ -10,13 +10,15 @@ stable-baselines3 VecEnv; the last observation comes back separately.
 from __future__ import annotations
 
 from dataclasses import dataclass
-from typing import Callable, Protocol, Sequence
+from typing import TYPE_CHECKING, Callable, Protocol, Sequence
 
 import numpy as np
 
 from glocal_ros.tasks import task_index
 from sim_node.episode import PHASE_EVAL, PHASE_TRAIN, UNSEEDED, EpisodeLog
-from sim_node.grasp_env import GraspState
+
+if TYPE_CHECKING:  # the learner imports this module's types and must not load pybullet
+    from sim_node.grasp_env import GraspState
 
 #: float32 rounding of a tanh-squashed action can overshoot 1 by an ulp or so.
 ACTION_TOLERANCE = 1e-5

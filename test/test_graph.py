@@ -40,7 +40,7 @@ def test_curriculum_decision_travels_through_learner_and_sim(start_node, ros_nod
     assert sorted([state.global_task, *state.local_tasks]) == sorted(best.tasks)
     wait_until(lambda: assignments, 10, "the global task's assignment", processes=processes[:-1])
     assert (assignments[-1].role, assignments[-1].task) == (TaskAssignment.ROLE_GLOBAL, state.global_task)
-    assert assignments[-1].initial_policy == "random"
+    assert assignments[-1].initial_policy == "prior"
 
     # The evaluation ran in the sim: at least S-bar finished eval episodes per task.
     finished = [e for e in episodes if e.phase == EpisodeRecord.PHASE_EVAL and not e.interrupted]
@@ -57,4 +57,4 @@ def test_curriculum_decision_travels_through_learner_and_sim(start_node, ros_nod
             by_topic.setdefault(connection.topic, []).append(reader.deserialize(raw, connection.msgtype))
     assert [e.seq for e in by_topic["/glocal/episodes"]] == [e.seq for e in episodes]
     assert by_topic["/glocal/curriculum_state"][-1].global_task == state.global_task
-    assert by_topic["/glocal/evaluations"][0].policy == "random"
+    assert by_topic["/glocal/evaluations"][0].policy == "prior"

@@ -10,9 +10,25 @@ from node_common.calls import call
 
 
 @pytest.fixture
-def learner(start_node, ros_node):
+def policy_dir(tmp_path):
+    """A policy store holding one (untrained) SAC policy, 'untrained'."""
+    from stable_baselines3 import SAC
+
+    from learner_node.policy_store import PolicyRecord, PolicyStore
+    from learner_node.sac_settings import SAC_KWARGS
+    from sim_node.grasp_env import GraspEnv
+
+    env = GraspEnv("A0")
+    model = SAC("MlpPolicy", env, seed=0, device="cpu", **{**SAC_KWARGS, "buffer_size": 100})
+    PolicyStore(tmp_path / "policies").save(model, PolicyRecord(name="untrained", task="A0"))
+    env.close()
+    return tmp_path / "policies"
+
+
+@pytest.fixture
+def learner(start_node, ros_node, policy_dir):
     sim = start_node("sim_node", num_envs=2, max_steps=10)
-    learner = start_node("learner_node", max_eval_episodes=50)
+    learner = start_node("learner_node", max_eval_episodes=50, policy_dir=str(policy_dir))
     evaluate = ros_node.create_client(Evaluate, names.LEARNER_EVALUATE)
     wait_until(evaluate.service_is_ready, 60, "learner/evaluate", processes=[sim, learner])
     return learner, evaluate
@@ -30,11 +46,23 @@ def test_evaluate_scores_every_task(learner, ros_node):
     assert evaluations[0].policy == "random" and evaluations[0].purpose == "request"
 
     policies = call(ros_node.create_client(ListPolicies, names.LEARNER_LIST_POLICIES), ListPolicies.Request())
-    assert "random" in [p.name for p in policies.policies]
+    assert {"random", "untrained"} <= {p.name for p in policies.policies}
+
+
+def test_evaluate_a_stored_policy_records_its_score(learner, ros_node, policy_dir):
+    process, evaluate = learner
+    response = call(evaluate, Evaluate.Request(policy="untrained", tasks=["B1"], episodes=2, seed=0))
+    assert response.success, response.message
+    assert (response.scores[0].task, response.scores[0].episodes) == ("B1", 2)
+    listed = call(ros_node.create_client(ListPolicies, names.LEARNER_LIST_POLICIES), ListPolicies.Request())
+    untrained = next(p for p in listed.policies if p.name == "untrained")
+    assert (untrained.task, untrained.last_score_task) == ("A0", "B1")
+    assert untrained.last_score == response.scores[0].successes and untrained.updated.sec > 0
 
 
 @pytest.mark.parametrize("request_fields, message", [
     ({"policy": "no_such_policy", "tasks": ["A0"]}, "unknown policy 'no_such_policy'"),
+    ({"policy": "../etc", "tasks": ["A0"]}, "invalid policy name"),
     ({"policy": "random", "tasks": ["A0", "K2"]}, "unknown task 'K2'"),
     ({"policy": "random", "tasks": []}, "no task"),
     ({"policy": "random", "tasks": ["A0", "A0"]}, "repeat"),

@@ -1,0 +1,101 @@
+"""The A0 prior every strategy starts from: SAC seeded with scripted demonstrations.
+
+Sparse-reward SAC from scratch takes tens of thousands of steps to find its
+first grasp here (ENVIRONMENT.md); the paper itself starts every strategy
+from a prior trained on A0. So the replay buffer is seeded with episodes of
+the scripted grasp controller (privileged state, same action space), and SAC
+then trains on the plain sparse reward: no shaping, no relabelling.
+
+Training checkpoints (model and replay buffer) to a work directory, so an
+interrupted ``glocal-ros train-prior`` resumes where it stopped. The env and
+the demonstrator are passed in: this module does not import the simulator.
+"""
+
+from __future__ import annotations
+
+from collections import deque
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Callable
+
+import gymnasium as gym
+import numpy as np
+
+from learner_node.sac_settings import SAC_KWARGS, TORCH_THREADS
+
+Demonstrator = Callable[[gym.Env], np.ndarray]
+
+
+@dataclass(frozen=True)
+class PriorConfig:
+    task: str = "A0"
+    demo_episodes: int = 50
+    max_steps: int = 40_000  # env steps of SAC training
+    checkpoint_every: int = 5_000
+    stop_success_rate: float = 0.95  # of the last 50 training episodes ...
+    min_steps: int = 15_000  # ... once at least this many steps are trained
+    seed: int = 0
+
+
+def seed_replay_buffer(model, env: gym.Env, demonstrator: Demonstrator, episodes: int, seed: int) -> int:
+    """Add ``episodes`` scripted episodes to ``model``'s replay buffer; returns the transitions added."""
+    added = 0
+    for episode in range(episodes):
+        obs, _ = env.reset(seed=seed + episode)
+        done = False
+        while not done:
+            action = demonstrator(env)
+            next_obs, reward, terminated, truncated, _ = env.step(action)
+            done = terminated or truncated
+            model.replay_buffer.add(
+                obs[None], next_obs[None], action[None], np.array([reward]), np.array([done]),
+                [{"TimeLimit.truncated": truncated and not terminated}],
+            )
+            obs = next_obs
+            added += 1
+    return added
+
+
+def train_prior(make_env: Callable[[], gym.Env], demonstrator: Demonstrator, work_dir: Path,
+                config: PriorConfig = PriorConfig(), progress: Callable[[int, float], None] | None = None):
+    """Train (or resume training) the prior; returns the SAC model."""
+    import torch
+    from stable_baselines3 import SAC
+    from stable_baselines3.common.callbacks import BaseCallback
+
+    torch.set_num_threads(TORCH_THREADS)
+    work_dir.mkdir(parents=True, exist_ok=True)
+    checkpoint, buffer_file = work_dir / "checkpoint.zip", work_dir / "replay_buffer.pkl"
+    env = make_env()
+    if checkpoint.is_file() and buffer_file.is_file():
+        model = SAC.load(checkpoint, env=env, device="cpu")
+        model.load_replay_buffer(buffer_file)
+    else:
+        model = SAC("MlpPolicy", env, seed=config.seed, device="cpu", **SAC_KWARGS)
+        seed_replay_buffer(model, make_env(), demonstrator, config.demo_episodes, config.seed + 10_000)
+        # Demonstrations fill the buffer, so updates (and policy actions) start at once.
+        model.learning_starts = 0
+
+    successes: deque[bool] = deque(maxlen=50)
+
+    class Progress(BaseCallback):
+        def _on_step(self) -> bool:
+            for done, info in zip(self.locals["dones"], self.locals["infos"]):
+                if done:
+                    successes.append(bool(info.get("is_success", False)))
+            rate = float(np.mean(successes)) if successes else 0.0
+            steps = self.model.num_timesteps
+            if progress is not None:
+                progress(steps, rate)
+            if steps % config.checkpoint_every == 0:
+                self.model.save(checkpoint)
+                self.model.save_replay_buffer(buffer_file)
+            return not (steps >= config.min_steps and len(successes) == successes.maxlen
+                        and rate >= config.stop_success_rate)
+
+    remaining = config.max_steps - model.num_timesteps
+    if remaining > 0:
+        model.learn(remaining, callback=Progress(), reset_num_timesteps=False)
+    model.save(checkpoint)
+    model.save_replay_buffer(buffer_file)
+    return model

@@ -1,0 +1,71 @@
+"""The policy store: named SB3 policies on disk, written atomically."""
+
+import subprocess
+import sys
+
+import numpy as np
+import pytest
+from stable_baselines3 import SAC
+
+from learner_node.policy_store import PolicyRecord, PolicyStore, UnknownPolicyError
+from learner_node.sac_settings import SAC_KWARGS
+from sim_node.grasp_env import GraspEnv
+
+
+@pytest.fixture(scope="module")
+def model():
+    env = GraspEnv("A0")
+    yield SAC("MlpPolicy", env, seed=0, device="cpu", **{**SAC_KWARGS, "buffer_size": 100})
+    env.close()
+
+
+def test_save_list_load_update(tmp_path, model):
+    store = PolicyStore(tmp_path)
+    assert store.names() == []
+    store.save(model, PolicyRecord(name="G1", task="B2", parent="prior", steps_trained=123))
+    assert store.names() == ["G1"] and "G1" in store
+    record = store.record("G1")
+    assert (record.task, record.parent, record.steps_trained, record.last_score) == ("B2", "prior", 123, -1.0)
+    observation = np.zeros((2, 63), dtype=np.float32)
+    np.testing.assert_allclose(store.load("G1").predict(observation, deterministic=True)[0],
+                               model.predict(observation, deterministic=True)[0], atol=1e-6)
+    assert store.update("G1", last_score=80.0, last_score_task="B2").last_score == 80.0
+
+
+def test_overwrite_keeps_one_complete_model(tmp_path, model):
+    store = PolicyStore(tmp_path)
+    store.save(model, PolicyRecord(name="L1"))
+    store.save(model, PolicyRecord(name="L1", steps_trained=5))
+    files = sorted(p.name for p in (tmp_path / "L1").iterdir())
+    assert files == ["model-2.zip", "policy.json"]
+    assert store.record("L1").steps_trained == 5
+
+
+def test_unknown_and_invalid_names(tmp_path):
+    store = PolicyStore(tmp_path)
+    with pytest.raises(UnknownPolicyError, match="unknown policy 'nope'"):
+        store.record("nope")
+    for bad in ("../escape", "", "a/b", ".hidden"):
+        with pytest.raises(ValueError, match="invalid policy name"):
+            store.record(bad)
+
+
+def test_a_kill_during_save_never_corrupts_the_store(tmp_path, model):
+    store = PolicyStore(tmp_path)
+    store.save(model, PolicyRecord(name="P", steps_trained=1))
+    # A process killed mid-save (SIGKILL right after it started writing the new model).
+    script = (
+        "import os, signal, sys\n"
+        "from stable_baselines3 import SAC\n"
+        "from learner_node.policy_store import PolicyStore, PolicyRecord\n"
+        "store = PolicyStore(sys.argv[1])\n"
+        "class Dying:\n"
+        "    def save(self, stream):\n"
+        "        stream.write(b'partial')\n"
+        "        os.kill(os.getpid(), signal.SIGKILL)\n"
+        "store.save(Dying(), PolicyRecord(name='P', steps_trained=2))\n"
+    )
+    result = subprocess.run([sys.executable, "-c", script, str(tmp_path)], capture_output=True)
+    assert result.returncode == -9
+    assert store.record("P").steps_trained == 1
+    store.load("P")  # still the complete first model
