@@ -5,6 +5,9 @@ Services: ``sim/reset`` (glocal_interfaces/srv/ResetEnvs), ``sim/step``
 EpisodeRecord per finished episode, reliable, seq-numbered), and for viewers,
 throttled and best effort, ``joint_states``, ``glocal/object_pose`` and
 ``glocal/grasp_state`` of the env named by ``viewer_env``.
+
+With ``workers`` > 1 the envs are split over worker processes that step
+their shares in parallel (``sim_node.parallel``); by default one per core.
 """
 
 from __future__ import annotations
