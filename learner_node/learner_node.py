@@ -6,8 +6,8 @@ scores, for the record). The learner never imports pybullet: it acts through
 the sim node's batched ``sim/reset`` and ``sim/step``.
 
 Policies: ``random``, the learner's policy store (``policy_dir``) and the
-shipped A0 ``prior``. Issue "Learner" adds SAC training (the
-``learner/train`` action) and ``learner/copy_policy``.
+shipped A0 ``prior``; ``learner/copy_policy`` copies one into the store.
+Issue "Learner" adds SAC training (the ``learner/train`` action).
 """
 
 from __future__ import annotations
@@ -19,7 +19,7 @@ from pathlib import Path
 
 from builtin_interfaces.msg import Time
 from glocal_interfaces.msg import EvaluationResult, PolicyInfo, TaskScore
-from glocal_interfaces.srv import Evaluate, ListPolicies
+from glocal_interfaces.srv import CopyPolicy, Evaluate, ListPolicies
 from rclpy.callback_groups import MutuallyExclusiveCallbackGroup
 from rclpy.node import Node
 
@@ -56,6 +56,7 @@ class LearnerNode(Node):
         requests = MutuallyExclusiveCallbackGroup()
         self.create_service(Evaluate, names.LEARNER_EVALUATE, self.on_evaluate, callback_group=requests)
         self.create_service(ListPolicies, names.LEARNER_LIST_POLICIES, self.on_list_policies)
+        self.create_service(CopyPolicy, names.LEARNER_COPY_POLICY, self.on_copy_policy)
         self.evaluations_pub = self.create_publisher(EvaluationResult, names.EVALUATIONS, qos.EVENTS)
         self.get_logger().info(f"policies: {', '.join(self.policies.names())}")
 
@@ -93,6 +94,13 @@ class LearnerNode(Node):
                        updated=Time(sec=_epoch_seconds(r.updated)))
             for r in self.policies.records()
         ]
+        return response
+
+    @answers_errors("copy_policy")
+    def on_copy_policy(self, request: CopyPolicy.Request, response: CopyPolicy.Response) -> CopyPolicy.Response:
+        self.policies.copy(request.source, request.destination)
+        response.success = True
+        self.get_logger().info(f"copied policy {request.source} to {request.destination}")
         return response
 
     def _publish_evaluation(self, policy: str, scores: list[TaskScore], purpose: str) -> None:

@@ -54,6 +54,14 @@ class PolicyRegistry:
         model = self._models[path]
         return lambda observations: model.predict(observations, deterministic=True)[0]
 
+    def copy(self, source: str, destination: str) -> PolicyRecord:
+        """Copy a stored policy into the learner's own store under a new name."""
+        if destination == RANDOM_POLICY or destination in self.names():
+            raise ValueError(f"policy {destination!r} exists already")
+        if source == RANDOM_POLICY:
+            raise ValueError(f"{RANDOM_POLICY!r} is built in and has no model to copy")
+        return self.store.add_copy(self._store_of(source), source, destination)
+
     def record_score(self, name: str, task: str, successes: int) -> None:
         """Remember the latest score of a policy of the learner's own store."""
         if name in self.store:

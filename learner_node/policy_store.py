@@ -103,6 +103,18 @@ class PolicyStore:
             (folder / previous).unlink(missing_ok=True)
         return record
 
+    def add_copy(self, source: "PolicyStore", name: str, destination: str) -> PolicyRecord:
+        """Store a copy of ``source``'s policy ``name`` as ``destination`` (model and metadata)."""
+        record = source.record(name)
+        model_bytes = source.model_path(name).read_bytes()
+
+        class Saved:
+            def save(self, stream) -> None:
+                stream.write(model_bytes)
+
+        record.name = check_name(destination)
+        return self.save(Saved(), record)
+
     def update(self, name: str, **changes) -> PolicyRecord:
         """Change metadata only (e.g. the last score)."""
         record = self.record(name)

@@ -2,7 +2,7 @@
 
 import pytest
 from glocal_interfaces.msg import EvaluationResult
-from glocal_interfaces.srv import Evaluate, ListPolicies
+from glocal_interfaces.srv import CopyPolicy, Evaluate, ListPolicies
 
 from conftest import wait_until
 from node_common import names, qos
@@ -74,3 +74,18 @@ def test_bad_evaluate_is_answered_and_the_node_keeps_serving(learner, request_fi
     assert not response.success and message in response.message
     assert call(evaluate, Evaluate.Request(policy="random", tasks=["A0"], episodes=1, seed=-1)).success
     assert process.process.poll() is None
+
+
+def test_copy_policy_into_the_store(learner, ros_node, policy_dir):
+    process, evaluate = learner
+    copy = ros_node.create_client(CopyPolicy, names.LEARNER_COPY_POLICY)
+    assert call(copy, CopyPolicy.Request(source="prior", destination="A0_learned")).success
+    assert (policy_dir / "A0_learned" / "policy.json").is_file()
+    for source, destination, message in [("prior", "A0_learned", "exists already"),
+                                         ("nope", "x", "unknown policy 'nope'"),
+                                         ("random", "r2", "built in"),
+                                         ("prior", "../x", "invalid policy name")]:
+        response = call(copy, CopyPolicy.Request(source=source, destination=destination))
+        assert not response.success and message in response.message
+    response = call(evaluate, Evaluate.Request(policy="A0_learned", tasks=["A0"], episodes=2, seed=1))
+    assert response.success and process.process.poll() is None
