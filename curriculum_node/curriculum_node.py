@@ -14,6 +14,7 @@ ablations, and resuming a run.
 from __future__ import annotations
 
 import threading
+import traceback
 
 from glocal_interfaces.msg import CurriculumState, TaskAssignment, TaskCluster
 from glocal_interfaces.srv import Evaluate
@@ -75,6 +76,9 @@ class CurriculumNode(Node):
             self.decide(clustering)
         except ServiceCallError as error:
             self.get_logger().fatal(f"curriculum stopped: {error}")
+            self.exit_code = 1
+        except Exception:  # noqa: BLE001 - the run must end the node, not leave it hanging
+            self.get_logger().fatal(f"curriculum failed:\n{traceback.format_exc()}")
             self.exit_code = 1
         self.finish()
 
