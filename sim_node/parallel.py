@@ -16,6 +16,7 @@ from typing import Sequence
 
 import numpy as np
 
+from glocal_ros.tasks import task_index
 from sim_node.batch import BatchedEnvs, EnvSnapshot, StepBatch, normalize_reset, normalize_step
 from sim_node.episode import PHASE_TRAIN
 from sim_node.grasp_env import GraspEnv, GraspEnvConfig
@@ -54,6 +55,7 @@ def split(num_envs: int, workers: int) -> list[range]:
 class ProcessBatchedEnvs:
     def __init__(self, num_envs: int, workers: int, initial_task: str, objects_dir: str,
                  config: GraspEnvConfig, gui: bool = False):
+        task_index(initial_task)  # a clear error here, not a worker dying at start-up
         context = mp.get_context("spawn")
         self.shares = split(num_envs, workers)
         self._connections = []
