@@ -4,7 +4,7 @@ Names resolve, in order, to the built-in ``random`` (uniform random actions,
 the chance level every learned policy must beat), the learner's own policy
 store, then the read-only stores shipped with the package (``assets/priors``:
 the A0 ``prior``). Stored policies are stable-baselines3 SAC models acting
-deterministically; loaded models are cached until their file changes.
+deterministically; each name keeps its loaded model until its file changes.
 """
 
 from __future__ import annotations
@@ -26,7 +26,7 @@ class PolicyRegistry:
         self.store = store
         self.read_only = list(read_only)
         self._rng = np.random.default_rng(seed)
-        self._models: dict[Path, object] = {}
+        self._models: dict[str, tuple[Path, object]] = {}  # name -> (model file, model)
 
     def names(self) -> list[str]:
         names = {RANDOM_POLICY, *self.store.names()}
@@ -49,9 +49,9 @@ class PolicyRegistry:
             ).astype(np.float32)
         store = self._store_of(name)
         path = store.model_path(name)
-        if path not in self._models:
-            self._models[path] = store.load(name)
-        model = self._models[path]
+        if self._models.get(name, (None,))[0] != path:
+            self._models[name] = (path, store.load(name))
+        model = self._models[name][1]
         return lambda observations: model.predict(observations, deterministic=True)[0]
 
     def copy(self, source: str, destination: str) -> PolicyRecord:

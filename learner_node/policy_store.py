@@ -29,6 +29,10 @@ class UnknownPolicyError(KeyError):
         return f"unknown policy {self.args[0]!r}"
 
 
+def _now() -> str:
+    return datetime.now(timezone.utc).isoformat(timespec="seconds")
+
+
 @dataclass
 class PolicyRecord:
     name: str
@@ -37,7 +41,7 @@ class PolicyRecord:
     steps_trained: int = 0  # env steps, ancestors' included
     last_score: float = -1.0  # -1: never evaluated
     last_score_task: str = ""
-    updated: str = field(default_factory=lambda: datetime.now(timezone.utc).isoformat(timespec="seconds"))
+    updated: str = field(default_factory=_now)
     model_file: str = ""
     extra: dict[str, Any] = field(default_factory=dict)
 
@@ -91,37 +95,35 @@ class PolicyStore:
 
     def save(self, model, record: PolicyRecord) -> PolicyRecord:
         """Store ``model`` (anything with SB3's ``save``) under ``record.name``, atomically."""
-        folder = self.root / check_name(record.name)
-        folder.mkdir(parents=True, exist_ok=True)
-        previous = self.record(record.name).model_file if record.name in self else ""
-        version = int(previous.removeprefix("model-").removesuffix(".zip") or 0) + 1 if previous else 1
-        record.model_file = f"model-{version}.zip"
-        record.updated = datetime.now(timezone.utc).isoformat(timespec="seconds")
-        _atomic_write(folder / record.model_file, model.save)
-        self._write_record(record)
-        if previous and previous != record.model_file:
-            (folder / previous).unlink(missing_ok=True)
-        return record
+        return self._store(record, model.save)
 
     def add_copy(self, source: "PolicyStore", name: str, destination: str) -> PolicyRecord:
         """Store a copy of ``source``'s policy ``name`` as ``destination`` (model and metadata)."""
         record = source.record(name)
         model_bytes = source.model_path(name).read_bytes()
-
-        class Saved:
-            def save(self, stream) -> None:
-                stream.write(model_bytes)
-
-        record.name = check_name(destination)
-        return self.save(Saved(), record)
+        record.name = destination
+        return self._store(record, lambda stream: stream.write(model_bytes))
 
     def update(self, name: str, **changes) -> PolicyRecord:
         """Change metadata only (e.g. the last score)."""
         record = self.record(name)
         for key, value in changes.items():
             setattr(record, key, value)
-        record.updated = datetime.now(timezone.utc).isoformat(timespec="seconds")
+        record.updated = _now()
         self._write_record(record)
+        return record
+
+    def _store(self, record: PolicyRecord, write_model) -> PolicyRecord:
+        """A new model file written by ``write_model(stream)``, then the record naming it."""
+        folder = self.root / check_name(record.name)
+        folder.mkdir(parents=True, exist_ok=True)
+        previous = self.record(record.name).model_file if record.name in self else ""
+        version = int(previous[len("model-"):-len(".zip")]) + 1 if previous else 1
+        record.model_file, record.updated = f"model-{version}.zip", _now()
+        _atomic_write(folder / record.model_file, write_model)
+        self._write_record(record)
+        if previous:
+            (folder / previous).unlink(missing_ok=True)
         return record
 
     def _write_record(self, record: PolicyRecord) -> None:
