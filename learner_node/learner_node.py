@@ -1,26 +1,37 @@
-"""learner_node: the policies, and the Evaluate (and later Train) requests on them.
+"""learner_node: the policies, SAC training on them, and their evaluation.
 
-Services: ``learner/evaluate`` (glocal_interfaces/srv/Evaluate),
-``learner/list_policies``. Topic: ``glocal/evaluations`` (every evaluation's
-scores, for the record). The learner never imports pybullet: it acts through
-the sim node's batched ``sim/reset`` and ``sim/step``.
+Action ``learner/train`` (glocal_interfaces/action/Train): SAC from a stored
+policy on a task, with feedback, cancel, and a checkpoint that the same goal
+sent again after a crash continues from. Services ``learner/evaluate``,
+``learner/list_policies``, ``learner/copy_policy``. Topics
+``glocal/evaluations`` (every evaluation's scores) and
+``glocal/training_progress``. The learner never imports pybullet: it acts
+through the sim node's batched ``sim/reset`` and ``sim/step``.
+
+One sim serves one job at a time. An Evaluate request that arrives while a
+Train goal runs is served between two training steps (the goal pauses, then
+goes on); a second Train goal is rejected while one runs.
 
 Policies: ``random``, the learner's policy store (``policy_dir``) and the
 shipped A0 ``prior``; ``learner/copy_policy`` copies one into the store.
-Issue "Learner" adds SAC training (the ``learner/train`` action).
 """
 
 from __future__ import annotations
 
 import os
 import threading
+import time
+from collections import deque
 from datetime import datetime
 from pathlib import Path
+from typing import Callable
 
 from builtin_interfaces.msg import Time
-from glocal_interfaces.msg import EvaluationResult, PolicyInfo, TaskScore
+from glocal_interfaces.action import Train
+from glocal_interfaces.msg import EpisodeOutcome, EvaluationResult, PolicyInfo, TaskScore, TrainingProgress
 from glocal_interfaces.srv import CopyPolicy, Evaluate, ListPolicies
-from rclpy.callback_groups import MutuallyExclusiveCallbackGroup
+from rclpy.action import ActionServer, CancelResponse, GoalResponse
+from rclpy.callback_groups import MutuallyExclusiveCallbackGroup, ReentrantCallbackGroup
 from rclpy.node import Node
 
 from glocal_ros.paths import assets_dir
@@ -29,12 +40,31 @@ from learner_node.evaluation import evaluate
 from learner_node.policies import PolicyRegistry
 from learner_node.policy_store import PolicyStore
 from learner_node.sim_client import SimClient
+from learner_node.training import DEFAULT_EVAL_EPISODES, DEFAULT_THRESHOLD_FRACTION, Trainer, TrainProgress, TrainSpec
 from node_common import names, qos
 from node_common.params import declare
 from node_common.runner import spin_node
 from node_common.services import answers_errors
 
-DEFAULT_EVAL_EPISODES = 100
+JOB_POLL_SEC = 0.02
+CLOSE_TIMEOUT_SEC = 10.0
+
+
+class SimJob:
+    """Work for the sim, run by whichever thread holds it (see ``LearnerNode.run_on_sim``)."""
+
+    def __init__(self, work: Callable[[], object]):
+        self.work = work
+        self.done = threading.Event()
+        self.result: object = None
+        self.error: BaseException | None = None
+
+    def run(self) -> None:
+        try:
+            self.result = self.work()
+        except BaseException as error:  # noqa: BLE001 - handed to the waiting caller
+            self.error = error
+        self.done.set()
 
 
 class LearnerNode(Node):
@@ -46,18 +76,30 @@ class LearnerNode(Node):
                                    min_value=0.1, max_value=3600.0)
         seed = declare(self, "seed", 0, "seed of the learner's random streams", min_value=0, max_value=2**31 - 1)
         policy_dir = declare(self, "policy_dir", str(default_policy_dir()), "the learner's policy store")
+        checkpoint_interval = declare(self, "checkpoint_interval", 5_000,
+                                      "training env steps between checkpoints of a Train goal",
+                                      min_value=1, max_value=10_000_000)
 
         self.policies = PolicyRegistry(PolicyStore(Path(policy_dir)), [PolicyStore(assets_dir() / "priors")], seed)
         self.sim = SimClient(self, timeout_sec=self.sim_timeout)
-        # One request at a time drives the sim's envs.
+        self.trainer = Trainer(self.sim, self.policies, Path(policy_dir) / ".checkpoints", seed, checkpoint_interval)
+        # Whoever holds sim_lock runs the queued jobs: a training goal between
+        # its steps, otherwise the requester itself.
         self.sim_lock = threading.Lock()
-        self.learner_steps = 0
+        self._jobs: deque[SimJob] = deque()
+        self._jobs_lock = threading.Lock()
+        self._goal_active = threading.Event()
 
         requests = MutuallyExclusiveCallbackGroup()
         self.create_service(Evaluate, names.LEARNER_EVALUATE, self.on_evaluate, callback_group=requests)
         self.create_service(ListPolicies, names.LEARNER_LIST_POLICIES, self.on_list_policies)
         self.create_service(CopyPolicy, names.LEARNER_COPY_POLICY, self.on_copy_policy)
         self.evaluations_pub = self.create_publisher(EvaluationResult, names.EVALUATIONS, qos.EVENTS)
+        self.progress_pub = self.create_publisher(TrainingProgress, names.TRAINING_PROGRESS, qos.EVENTS)
+        self.train_server = ActionServer(
+            self, Train, names.LEARNER_TRAIN, self.execute_train, goal_callback=self.on_train_goal,
+            cancel_callback=lambda goal: CancelResponse.ACCEPT, callback_group=ReentrantCallbackGroup(),
+        )
         self.get_logger().info(f"policies: {', '.join(self.policies.names())}")
 
     @answers_errors("evaluate")
@@ -71,12 +113,10 @@ class LearnerNode(Node):
         if episodes > self.max_eval_episodes:
             raise ValueError(f"episodes {episodes} above max_eval_episodes {self.max_eval_episodes}")
         policy = self.policies.load(request.policy)
-        with self.sim_lock:
-            self.sim.wait_for_sim(self.sim_timeout)
-            scores = evaluate(
-                self.sim, policy, tasks, episodes, policy_name=request.policy,
-                seed=None if request.seed < 0 else request.seed, global_step=self.learner_steps,
-            )
+        scores = self.run_on_sim(lambda: evaluate(
+            self.sim, policy, tasks, episodes, policy_name=request.policy,
+            seed=None if request.seed < 0 else request.seed, global_step=self.trainer.total_steps,
+        ))
         response.scores = [TaskScore(task=s.task, successes=s.successes, episodes=s.episodes) for s in scores]
         response.success = True
         if len(scores) == 1:
@@ -86,6 +126,124 @@ class LearnerNode(Node):
             f"evaluated {request.policy}: " + ", ".join(f"{s.task} {s.successes}/{s.episodes}" for s in scores)
         )
         return response
+
+    def run_on_sim(self, work: Callable[[], object]) -> object:
+        """Run ``work`` on the sim: between two steps of a running Train goal, or at once when idle."""
+        job = SimJob(work)
+        with self._jobs_lock:
+            self._jobs.append(job)
+        while not job.done.wait(JOB_POLL_SEC):
+            if self.sim_lock.acquire(blocking=False):
+                try:
+                    self.sim.wait_for_sim(self.sim_timeout)
+                    self.run_jobs()
+                finally:
+                    self.sim_lock.release()
+        if job.error is not None:
+            raise job.error
+        return job.result
+
+    def run_jobs(self) -> bool:
+        """Run every queued job (the caller holds ``sim_lock``); True when there was one."""
+        ran = False
+        while True:
+            with self._jobs_lock:
+                if not self._jobs:
+                    return ran
+                job = self._jobs.popleft()
+            job.run()
+            ran = True
+
+    def on_train_goal(self, goal: Train.Goal) -> GoalResponse:
+        if self._goal_active.is_set():
+            self.get_logger().warning(f"rejected Train goal for {goal.output_policy}: a goal is running")
+            return GoalResponse.REJECT
+        return GoalResponse.ACCEPT
+
+    def execute_train(self, goal_handle) -> Train.Result:
+        goal: Train.Goal = goal_handle.request
+        result = Train.Result()
+        try:
+            eval_episodes = goal.eval_episodes or DEFAULT_EVAL_EPISODES
+            spec = TrainSpec(
+                task=goal.task, episode_tasks=tuple(goal.episode_tasks), initial_policy=goal.initial_policy,
+                output_policy=goal.output_policy, step_budget=goal.step_budget,
+                threshold=goal.threshold or DEFAULT_THRESHOLD_FRACTION * eval_episodes, eval_episodes=eval_episodes,
+                eval_interval=goal.eval_interval, stop_when_learned=goal.stop_when_learned,
+                keep_replay_buffer=goal.keep_replay_buffer,
+            )
+            spec.check(self.max_eval_episodes)
+            self.policies.record(spec.initial_policy)  # an unknown policy fails here, not mid-goal
+        except (ValueError, KeyError) as error:
+            result.message = str(error)
+            self.get_logger().warning(f"refused Train goal: {result.message}")
+            goal_handle.abort()
+            return result
+
+        self._goal_active.set()
+        try:
+            with self.sim_lock:
+                self.sim.wait_for_sim(self.sim_timeout)
+                self.get_logger().info(f"training {spec.output_policy} from {spec.initial_policy} on "
+                                       f"{spec.task or ','.join(spec.episode_tasks)}, budget {spec.step_budget}")
+                outcome = self.trainer.train(
+                    spec,
+                    on_progress=lambda progress: self._publish_progress(goal_handle, spec, progress),
+                    should_stop=lambda: self._stop_reason(goal_handle),
+                    between_steps=self.run_jobs,
+                )
+                self.run_jobs()  # whatever arrived after the last step
+        except Exception as error:  # noqa: BLE001 - the client gets the reason; the node keeps serving
+            result.message = f"training failed: {type(error).__name__}: {error}"
+            self.get_logger().error(result.message)
+            goal_handle.abort()
+            return result
+        finally:
+            self._goal_active.clear()
+
+        result.learned, result.steps_used, result.message = outcome.learned, outcome.steps_used, outcome.message
+        if outcome.score is not None:
+            result.score = TaskScore(task=outcome.score.task, successes=outcome.score.successes,
+                                     episodes=outcome.score.episodes)
+            self.policies.record_score(spec.output_policy, outcome.score.task, outcome.score.successes)
+            self._publish_evaluation(spec.output_policy, [result.score], "train")
+        result.episodes = [EpisodeOutcome(task=e.task, episode_return=e.episode_return, length=e.length,
+                                          success=e.success) for e in outcome.episodes]
+        self.get_logger().info(f"{spec.output_policy}: {outcome.message}")
+        if goal_handle.is_cancel_requested:
+            goal_handle.canceled()
+        elif outcome.completed:
+            goal_handle.succeed()
+        else:
+            goal_handle.abort()
+        return result
+
+    def close(self) -> None:
+        """Give a running Train goal a moment to stop at a step and write its checkpoint."""
+        deadline = time.monotonic() + CLOSE_TIMEOUT_SEC
+        while self._goal_active.is_set() and time.monotonic() < deadline:
+            time.sleep(0.05)
+
+    def _stop_reason(self, goal_handle) -> str:
+        if goal_handle.is_cancel_requested:
+            return "canceled"
+        if not self.context.ok():
+            return "the learner is shutting down"
+        return ""
+
+    def _publish_progress(self, goal_handle, spec: TrainSpec, progress: TrainProgress) -> None:
+        goal_handle.publish_feedback(Train.Feedback(
+            steps=progress.steps, episodes=progress.episodes, recent_success_rate=progress.recent_success_rate,
+            latest_score=progress.latest_score,
+        ))
+        message = TrainingProgress(
+            output_policy=spec.output_policy, task=spec.task, goal_steps=progress.steps,
+            step_budget=spec.step_budget, learner_steps=self.trainer.total_steps, episodes=progress.episodes,
+            recent_success_rate=progress.recent_success_rate, latest_score=progress.latest_score,
+            env_steps_per_second=progress.steps_per_second,
+        )
+        message.header.stamp = self.get_clock().now().to_msg()
+        self.progress_pub.publish(message)
 
     def on_list_policies(self, request: ListPolicies.Request, response: ListPolicies.Response):
         response.policies = [
@@ -104,7 +262,7 @@ class LearnerNode(Node):
         return response
 
     def _publish_evaluation(self, policy: str, scores: list[TaskScore], purpose: str) -> None:
-        result = EvaluationResult(policy=policy, learner_steps=self.learner_steps, purpose=purpose, scores=scores)
+        result = EvaluationResult(policy=policy, learner_steps=self.trainer.total_steps, purpose=purpose, scores=scores)
         result.header.stamp = self.get_clock().now().to_msg()
         self.evaluations_pub.publish(result)
 
@@ -119,8 +277,9 @@ def _epoch_seconds(iso_time: str) -> int:
 
 
 def main(args=None) -> int:
-    # Evaluate blocks on sim/step responses, which another thread must take.
-    return spin_node(LearnerNode, args, num_threads=4)
+    # A Train goal and an Evaluate request block on sim/step responses, which
+    # other threads must take.
+    return spin_node(LearnerNode, args, num_threads=6)
 
 
 if __name__ == "__main__":

@@ -47,12 +47,20 @@ class PolicyRegistry:
             return lambda observations: self._rng.uniform(
                 -1.0, 1.0, size=(len(observations), ACTION_DIM)
             ).astype(np.float32)
-        store = self._store_of(name)
-        path = store.model_path(name)
-        if self._models.get(name, (None,))[0] != path:
-            self._models[name] = (path, store.load(name))
-        model = self._models[name][1]
+        model = self.model(name)
         return lambda observations: model.predict(observations, deterministic=True)[0]
+
+    def model(self, name: str):
+        """The SB3 model of a stored policy, loaded again only when its file changed."""
+        path = self.model_path(name)
+        if self._models.get(name, (None,))[0] != path:
+            self._models[name] = (path, self._store_of(name).load(name))
+        return self._models[name][1]
+
+    def model_path(self, name: str) -> Path:
+        if name == RANDOM_POLICY:
+            raise ValueError(f"{RANDOM_POLICY!r} is built in and has no model")
+        return self._store_of(name).model_path(name)
 
     def copy(self, source: str, destination: str) -> PolicyRecord:
         """Copy a stored policy into the learner's own store under a new name."""

@@ -52,7 +52,8 @@ def check_name(name: str) -> str:
     return name
 
 
-def _atomic_write(path: Path, write) -> None:
+def atomic_write(path: Path, write) -> None:
+    """Write ``path`` through ``write(stream)`` on a temporary file, fsync, then an atomic rename."""
     handle, temporary = tempfile.mkstemp(dir=path.parent, prefix=f".{path.name}.")
     os.fchmod(handle, 0o644)  # mkstemp's 0600 would hide shared or committed policies from others
     try:
@@ -120,7 +121,7 @@ class PolicyStore:
         previous = self.record(record.name).model_file if record.name in self else ""
         version = int(previous[len("model-"):-len(".zip")]) + 1 if previous else 1
         record.model_file, record.updated = f"model-{version}.zip", _now()
-        _atomic_write(folder / record.model_file, write_model)
+        atomic_write(folder / record.model_file, write_model)
         self._write_record(record)
         if previous:
             (folder / previous).unlink(missing_ok=True)
@@ -128,4 +129,4 @@ class PolicyStore:
 
     def _write_record(self, record: PolicyRecord) -> None:
         text = json.dumps(asdict(record), indent=2, sort_keys=True).encode() + b"\n"
-        _atomic_write(self.root / record.name / METADATA_FILE, lambda stream: stream.write(text))
+        atomic_write(self.root / record.name / METADATA_FILE, lambda stream: stream.write(text))

@@ -1,0 +1,296 @@
+"""One Train goal: SAC from a stored policy on a task, until learned or out of budget.
+
+ROS-free: the envs are anything with the batch interface (the sim node's
+client, or ``BatchedEnvs`` in-process for the bench and tests), and the goal's
+owner passes in what it needs to hear (progress), to say (stop) and to run
+between steps (evaluations others asked for).
+
+The loop is stable-baselines3's ``learn`` on a ``BatchVecEnv``; around it:
+- evaluation of ``task`` every ``eval_interval`` env steps and at the end,
+  the paper's score (successes out of ``eval_episodes``, deterministic);
+  learned means score > threshold (the paper's "above B");
+- a checkpoint (model, replay buffer, progress) every ``checkpoint_interval``
+  steps, so that the same goal sent again after a crash continues from it;
+- the trained model is written to the policy store only when the goal ends
+  by itself (budget spent or learned), never half-way.
+
+Choices:
+- A goal starts from the stored model with an empty replay buffer (what
+  loading an SB3 model gives), and updates start once a batch of
+  transitions is in it. ``keep_replay_buffer`` continues the previous goal's
+  model and buffer instead, when the goal starts from that goal's output:
+  the baselines train one policy through many short goals.
+- Only training env steps count against the budget; evaluation steps do not
+  (the paper counts training timesteps).
+"""
+
+from __future__ import annotations
+
+import json
+import shutil
+import time
+from collections import deque
+from dataclasses import asdict, dataclass, field
+from pathlib import Path
+from typing import Callable
+
+import numpy as np
+
+from glocal_ros.tasks import validate_tasks
+from learner_node.evaluation import BatchStepper, Score, evaluate
+from learner_node.policies import RANDOM_POLICY, PolicyRegistry
+from learner_node.policy_store import PolicyRecord, atomic_write, check_name
+from learner_node.replay_buffer import load_replay_buffer, save_replay_buffer
+from learner_node.sac_settings import SAC_KWARGS, TORCH_THREADS
+from learner_node.vec_env import BatchVecEnv, FinishedEpisode, TaskCycle
+
+#: B as a share of the evaluation episodes: the paper's 75 of 100.
+DEFAULT_THRESHOLD_FRACTION = 0.75
+DEFAULT_EVAL_EPISODES = 100
+CHECKPOINT_FILE = "checkpoint.json"
+
+
+@dataclass(frozen=True)
+class TrainSpec:
+    """What a Train goal asks for (see glocal_interfaces/action/Train.action)."""
+
+    task: str
+    initial_policy: str
+    output_policy: str
+    step_budget: int
+    episode_tasks: tuple[str, ...] = ()
+    threshold: float = DEFAULT_THRESHOLD_FRACTION * DEFAULT_EVAL_EPISODES
+    eval_episodes: int = DEFAULT_EVAL_EPISODES
+    eval_interval: int = 0
+    stop_when_learned: bool = False
+    keep_replay_buffer: bool = False
+
+    def check(self, max_eval_episodes: int = 1_000_000) -> None:
+        """Raise ``ValueError`` with a message a user can act on."""
+        if not self.task and not self.episode_tasks:
+            raise ValueError("a goal needs a task or episode_tasks")
+        validate_tasks([self.task] if self.task else [])
+        validate_tasks(list(self.episode_tasks))
+        check_name(self.initial_policy)
+        check_name(self.output_policy)
+        if self.initial_policy == RANDOM_POLICY:
+            raise ValueError(f"{RANDOM_POLICY!r} has no model to train from: start from a stored policy")
+        if self.output_policy == RANDOM_POLICY:
+            raise ValueError(f"{RANDOM_POLICY!r} is built in and cannot be written")
+        if self.step_budget < 1:
+            raise ValueError(f"step_budget must be at least 1, got {self.step_budget}")
+        if not 0 <= self.threshold < self.eval_episodes:
+            raise ValueError(f"threshold {self.threshold} must lie in [0, eval_episodes={self.eval_episodes})")
+        if not 1 <= self.eval_episodes <= max_eval_episodes:
+            raise ValueError(f"eval_episodes {self.eval_episodes} outside 1..{max_eval_episodes}")
+        if self.eval_interval < 0:
+            raise ValueError(f"eval_interval must not be negative, got {self.eval_interval}")
+
+
+@dataclass
+class TrainProgress:
+    steps: int  # training env steps of this goal
+    step_budget: int
+    episodes: int
+    recent_success_rate: float
+    latest_score: float  # -1 before the first evaluation
+    steps_per_second: float
+
+
+@dataclass
+class TrainOutcome:
+    learned: bool
+    score: Score | None  # the last evaluation of the task; None when the goal has no task or none ran
+    steps_used: int
+    episodes: list[FinishedEpisode]
+    message: str
+    completed: bool  # False: stopped (cancel, shutdown) before its end; nothing was stored
+
+
+@dataclass
+class _GoalState:
+    """What a checkpoint keeps besides the model and buffer."""
+
+    steps_used: int = 0
+    episodes: list[dict] = field(default_factory=list)
+    score: dict | None = None
+    learned: bool = False
+    steps_at_last_eval: int = 0
+
+
+class Trainer:
+    """Runs Train goals on ``envs`` with the policies of ``policies``."""
+
+    def __init__(self, envs: BatchStepper, policies: PolicyRegistry, checkpoint_root: Path, seed: int = 0,
+                 checkpoint_interval: int = 5_000, progress_interval_sec: float = 1.0):
+        self.envs = envs
+        self.policies = policies
+        self.checkpoint_root = Path(checkpoint_root)
+        self.seed = seed
+        self.checkpoint_interval = checkpoint_interval
+        self.progress_interval_sec = progress_interval_sec
+        self.total_steps = 0  # training env steps over all goals, for the episode records
+        self._warm: tuple[str, str, object] | None = None  # (policy, model file, model) of the last goal
+
+    def train(
+        self,
+        spec: TrainSpec,
+        on_progress: Callable[[TrainProgress], None] = lambda progress: None,
+        should_stop: Callable[[], str] = lambda: "",
+        between_steps: Callable[[], bool] = lambda: False,
+    ) -> TrainOutcome:
+        """Run ``spec`` to its end; ``should_stop`` returns a reason to stop early ("" to go on)."""
+        import torch
+        from stable_baselines3.common.callbacks import BaseCallback
+
+        torch.set_num_threads(TORCH_THREADS)
+        checkpoint_dir = self.checkpoint_root / spec.output_policy
+        state = _GoalState()
+        evaluate_now = {"due": False}
+
+        def between() -> bool:
+            used = between_steps()
+            if evaluate_now["due"]:
+                evaluate_now["due"] = False
+                self._evaluate_task(model, spec, state)
+                used = True
+            return used
+
+        vec_env = BatchVecEnv(self.envs, *self._spaces(spec), TaskCycle(spec.episode_tasks or (spec.task,)),
+                              policy_name=spec.output_policy, global_step=lambda: self.total_steps,
+                              between_steps=between)
+        model, resumed = self._model(spec, vec_env, checkpoint_dir, state)
+        recent = deque(maxlen=50)
+        started, stop_reason = time.monotonic(), ""
+        goal_start_timesteps = model.num_timesteps - state.steps_used
+        last = {"progress": 0.0, "checkpoint": state.steps_used}
+        trainer = self
+
+        class GoalCallback(BaseCallback):
+            def _on_step(self) -> bool:
+                nonlocal stop_reason
+                steps = self.model.num_timesteps - goal_start_timesteps
+                trainer.total_steps += vec_env.num_envs
+                state.steps_used = steps
+                while vec_env.finished:
+                    episode = vec_env.finished.popleft()
+                    state.episodes.append(asdict(episode))
+                    recent.append(episode.success)
+                if spec.task and spec.eval_interval and steps - state.steps_at_last_eval >= spec.eval_interval:
+                    evaluate_now["due"] = True  # runs between this step and the next
+                now = time.monotonic()
+                if now - last["progress"] >= trainer.progress_interval_sec:
+                    last["progress"] = now
+                    on_progress(TrainProgress(steps, spec.step_budget, len(state.episodes),
+                                              float(np.mean(recent)) if recent else 0.0,
+                                              state.score["successes"] if state.score else -1.0,
+                                              (steps - resumed) / max(now - started, 1e-9)))
+                if steps - last["checkpoint"] >= trainer.checkpoint_interval:
+                    last["checkpoint"] = steps
+                    trainer._save_checkpoint(checkpoint_dir, spec, self.model, state)
+                stop_reason = should_stop()
+                return not stop_reason and not (spec.stop_when_learned and state.learned)
+
+        remaining = spec.step_budget - state.steps_used
+        if remaining > 0 and not (spec.stop_when_learned and state.learned):
+            try:
+                model.learn(remaining, callback=GoalCallback(), reset_num_timesteps=False, progress_bar=False)
+            except BaseException:
+                # The sim went away, or the process is stopping: keep what was trained.
+                if state.steps_used > last["checkpoint"]:
+                    self._save_checkpoint(checkpoint_dir, spec, model, state)
+                self._warm = None
+                raise
+        if stop_reason:
+            self._save_checkpoint(checkpoint_dir, spec, model, state)
+            self._warm = None
+            return self._outcome(state, False, f"stopped after {state.steps_used} steps: {stop_reason}")
+        if spec.task and (state.score is None or state.steps_at_last_eval != state.steps_used):
+            self._evaluate_task(model, spec, state)
+        self._store(spec, model, state)
+        shutil.rmtree(checkpoint_dir, ignore_errors=True)
+        verdict = ("learned" if state.learned else "not learned") if spec.task else "trained"
+        message = f"{verdict} after {state.steps_used} steps"
+        if resumed:
+            message += f" (resumed from a checkpoint at step {resumed})"
+        return self._outcome(state, True, message)
+
+    def _spaces(self, spec: TrainSpec):
+        """The initial policy's spaces: SB3 refuses an env whose Box bounds differ from the model's."""
+        record = self.policies.record(spec.initial_policy)
+        model = self.policies.model(record.name)
+        return model.observation_space, model.action_space
+
+    def _model(self, spec: TrainSpec, vec_env: BatchVecEnv, checkpoint_dir: Path, state: _GoalState):
+        """The model to train and the step it resumes from (0 for a new goal)."""
+        from stable_baselines3 import SAC
+
+        saved = _read_checkpoint(checkpoint_dir)
+        if saved is not None and saved["spec"] == _spec_key(spec):
+            model = SAC.load(checkpoint_dir / saved["model"], env=vec_env, device="cpu")
+            if not load_replay_buffer(model.replay_buffer, checkpoint_dir / saved["buffer"]):
+                model.learning_starts = model.num_timesteps + SAC_KWARGS["batch_size"]
+            state.__dict__.update(saved["state"])
+            return model, state.steps_used
+        store_path = str(self.policies.model_path(spec.initial_policy))
+        if spec.keep_replay_buffer and self._warm and self._warm[:2] == (spec.initial_policy, store_path):
+            model = self._warm[2]
+            model.set_env(vec_env, force_reset=True)
+            return model, 0
+        model = SAC.load(store_path, env=vec_env, device="cpu")
+        model.set_random_seed(self.seed)
+        # An empty buffer: update once a batch of this goal's transitions is in.
+        model.learning_starts = model.num_timesteps + SAC_KWARGS["batch_size"]
+        return model, 0
+
+    def _evaluate_task(self, model, spec: TrainSpec, state: _GoalState) -> None:
+        (score,) = evaluate(self.envs, lambda obs: model.predict(obs, deterministic=True)[0], [spec.task],
+                            spec.eval_episodes, policy_name=spec.output_policy, global_step=self.total_steps)
+        state.score = asdict(score)
+        state.learned = score.successes > spec.threshold
+        state.steps_at_last_eval = state.steps_used
+
+    def _store(self, spec: TrainSpec, model, state: _GoalState) -> None:
+        parent = self.policies.record(spec.initial_policy)
+        record = PolicyRecord(
+            name=spec.output_policy, task=spec.task or ",".join(sorted(set(spec.episode_tasks))),
+            parent=spec.initial_policy, steps_trained=parent.steps_trained + state.steps_used,
+            last_score=float(state.score["successes"]) if state.score else -1.0,
+            last_score_task=spec.task if state.score else "",
+            extra={"learned": state.learned, "threshold": spec.threshold, "eval_episodes": spec.eval_episodes},
+        )
+        stored = self.policies.store.save(model, record)
+        self._warm = (spec.output_policy, str(self.policies.store.root / stored.name / stored.model_file), model)
+
+    def _save_checkpoint(self, folder: Path, spec: TrainSpec, model, state: _GoalState) -> None:
+        """Model and buffer under new names, then the json naming them: a kill leaves the last whole one."""
+        folder.mkdir(parents=True, exist_ok=True)
+        previous = _read_checkpoint(folder)
+        version = previous["version"] + 1 if previous else 1
+        model_file, buffer_file = f"model-{version}.zip", f"buffer-{version}.npz"
+        atomic_write(folder / model_file, model.save)
+        atomic_write(folder / buffer_file, lambda stream: save_replay_buffer(model.replay_buffer, stream))
+        text = json.dumps({"version": version, "spec": _spec_key(spec), "model": model_file, "buffer": buffer_file,
+                           "state": asdict(state)}).encode()
+        atomic_write(folder / CHECKPOINT_FILE, lambda stream: stream.write(text))
+        if previous:
+            for name in (previous["model"], previous["buffer"]):
+                (folder / name).unlink(missing_ok=True)
+
+    @staticmethod
+    def _outcome(state: _GoalState, completed: bool, message: str) -> TrainOutcome:
+        score = Score(**state.score) if state.score else None
+        return TrainOutcome(state.learned, score, state.steps_used,
+                            [FinishedEpisode(**e) for e in state.episodes], message, completed)
+
+
+def _read_checkpoint(folder: Path) -> dict | None:
+    path = folder / CHECKPOINT_FILE
+    if not path.is_file():
+        return None
+    return json.loads(path.read_text())
+
+
+def _spec_key(spec: TrainSpec) -> dict:
+    """The goal as its checkpoint stores it: the same goal sent again resumes it."""
+    return json.loads(json.dumps(asdict(spec)))
