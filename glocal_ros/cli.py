@@ -12,6 +12,7 @@ import os
 import sys
 from pathlib import Path
 
+from glocal_ros.bag_cli import add_bag_commands
 from glocal_ros.paths import assets_dir, objects_dir
 from glocal_ros.tasks import parse_task_list, sorted_tasks
 
@@ -163,6 +164,8 @@ def cmd_train_prior(args: argparse.Namespace) -> int:
 
 
 def build_parser() -> argparse.ArgumentParser:
+    from glocal_ros.analysis.report import add_report_command
+
     parser = argparse.ArgumentParser(prog="glocal-ros", description=__doc__.splitlines()[0])
     commands = parser.add_subparsers(dest="command", required=True)
 
@@ -227,6 +230,8 @@ def build_parser() -> argparse.ArgumentParser:
     launch.add_argument("--seed", type=int, default=0)
     launch.add_argument("--out", type=Path, required=True, help="run directory: gets bag/ and logs/")
     launch.set_defaults(func=cmd_launch)
+    add_report_command(commands)
+    add_bag_commands(commands)
     return parser
 
 

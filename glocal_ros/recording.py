@@ -6,15 +6,23 @@ MESSAGE mode is rejected by rosbag2's MCAP plugin and FILE mode makes a
 ``.mcap.zstd`` that MCAP tools cannot open). Every message definition is
 embedded as ros2msg, so rosbags, the ``mcap`` library and Foxglove can decode
 the bag without glocal_interfaces installed.
+
+Reading side: ``open_bag`` (a user-facing ValueError for a missing or killed
+recorder's bag), ``message_counts``, and the EpisodeRecord.seq checks
+(``SequenceTracker`` live in the recorder, ``episode_sequence`` on a bag).
 """
 
 from __future__ import annotations
 
+import bisect
+import struct
 import threading
-from dataclasses import dataclass
+from contextlib import contextmanager
+from dataclasses import dataclass, field
 from pathlib import Path
+from typing import Iterable, Iterator
 
-from rosbags.rosbag2 import CompressionFormat, CompressionMode, Reader, StoragePlugin, Writer
+from rosbags.rosbag2 import CompressionFormat, CompressionMode, Reader, ReaderError, StoragePlugin, Writer
 from rosbags.rosbag2.metadata import QosDurability, QosHistory, QosLiveliness, QosReliability, QosTime
 from rosbags.rosbag2.writer import Qos
 from rosbags.typesys import Stores, get_types_from_msg, get_typestore
@@ -23,6 +31,8 @@ from rosbags.typesys.store import Typestore
 from glocal_ros.paths import interface_definitions_dir
 
 INTERFACE_PACKAGE = "glocal_interfaces"
+#: The topic whose EpisodeRecord.seq counts a sim node's episodes from 0 without gaps.
+EPISODES_TOPIC = "/glocal/episodes"
 
 
 @dataclass(frozen=True)
@@ -36,7 +46,7 @@ class TopicSpec:
 
 #: Every topic of the graph, with the QoS its publisher offers.
 GRAPH_TOPICS: tuple[TopicSpec, ...] = (
-    TopicSpec("/glocal/episodes", "glocal_interfaces/msg/EpisodeRecord", True, False, 1000),
+    TopicSpec(EPISODES_TOPIC, "glocal_interfaces/msg/EpisodeRecord", True, False, 1000),
     TopicSpec("/glocal/curriculum_state", "glocal_interfaces/msg/CurriculumState", True, True, 10),
     TopicSpec("/glocal/task_assignment", "glocal_interfaces/msg/TaskAssignment", True, True, 10),
     TopicSpec("/glocal/training_progress", "glocal_interfaces/msg/TrainingProgress", True, False, 100),
@@ -101,7 +111,164 @@ class BagWriter:
             self._writer.close()
 
 
+@contextmanager
+def open_bag(bag: Path) -> Iterator[Reader]:
+    """A rosbags Reader on a closed bag; ValueError (a message for the user) when there is none.
+
+    A recorder that was killed leaves no metadata.yaml and MCAP files without
+    a summary, which rosbags refuses: the message says how to repair them.
+    """
+    bag = Path(bag)
+    if not bag.is_dir():
+        raise ValueError(f"no bag directory at {bag}")
+    hint = f"a killed recorder's bag? `glocal-ros bag repair {bag}` recovers it"
+    if not (bag / "metadata.yaml").is_file():
+        raise ValueError(f"{bag} has no metadata.yaml ({hint})")
+    reader = Reader(bag)
+    try:
+        reader.open()
+    except ReaderError as error:
+        raise ValueError(f"cannot read {bag}: {error} ({hint})") from error
+    try:
+        yield reader
+    finally:
+        reader.close()
+
+
 def message_counts(bag: Path) -> dict[str, int]:
     """Messages per topic of a closed bag, from its metadata."""
-    with Reader(bag) as reader:
+    with open_bag(bag) as reader:
         return {connection.topic: connection.msgcount for connection in reader.connections}
+
+
+@dataclass
+class SequenceCheck:
+    """What a stream of EpisodeRecord.seq values looks like: range, holes, repeats."""
+
+    count: int = 0
+    first: int | None = None  # lowest seq seen
+    last: int | None = None  # highest seq seen
+    gaps: list[tuple[int, int]] = field(default_factory=list)  # (first_missing, last_missing), inclusive
+    duplicates: list[int] = field(default_factory=list)  # each repeated arrival, sorted
+
+    @property
+    def ok(self) -> bool:
+        """No gap and no duplicate (a first seq above 0 only means the recording began late)."""
+        return not self.gaps and not self.duplicates
+
+    @property
+    def missing(self) -> int:
+        return sum(last - first + 1 for first, last in self.gaps)
+
+    def summary(self) -> str:
+        if not self.count:
+            return "no episodes"
+        text = f"{self.count} episodes, seq {self.first}..{self.last}"
+        if self.gaps:
+            shown = ", ".join(_seq_range(*gap) for gap in self.gaps[:10])
+            more = f" and {len(self.gaps) - 10} more" if len(self.gaps) > 10 else ""
+            text += f"; {self.missing} missing in {len(self.gaps)} gaps: {shown}{more}"
+        else:
+            text += "; no gaps"
+        if self.duplicates:
+            shown = ", ".join(str(seq) for seq in self.duplicates[:10])
+            text += f"; {len(self.duplicates)} duplicates: {shown}{' ...' if len(self.duplicates) > 10 else ''}"
+        if self.first:
+            text += f" (seq 0..{self.first - 1} precede the recording)"
+        return text
+
+
+def _seq_range(first: int, last: int) -> str:
+    return str(first) if first == last else f"{first}..{last}"
+
+
+class SequenceTracker:
+    """Seq values as they arrive, kept as sorted runs of consecutive values.
+
+    Memory grows with the number of gaps, not of episodes, so the recorder can
+    track a run of millions of episodes; late arrivals that fill a gap close
+    it, and a value inside a run is a duplicate.
+    """
+
+    def __init__(self) -> None:
+        self._starts: list[int] = []  # run starts, sorted: the bisect key
+        self._ends: list[int] = []  # inclusive run ends
+        self.count = 0
+        self.duplicates: list[int] = []
+
+    @property
+    def highest(self) -> int | None:
+        return self._ends[-1] if self._ends else None
+
+    def add(self, seq: int) -> None:
+        self.count += 1
+        i = bisect.bisect_right(self._starts, seq) - 1  # the run starting at or before seq
+        if i >= 0 and seq <= self._ends[i]:
+            bisect.insort(self.duplicates, seq)
+            return
+        joins_left = i >= 0 and self._ends[i] == seq - 1
+        joins_right = i + 1 < len(self._starts) and self._starts[i + 1] == seq + 1
+        if joins_left and joins_right:
+            self._ends[i] = self._ends.pop(i + 1)
+            del self._starts[i + 1]
+        elif joins_left:
+            self._ends[i] = seq
+        elif joins_right:
+            self._starts[i + 1] = seq
+        else:
+            self._starts.insert(i + 1, seq)
+            self._ends.insert(i + 1, seq)
+
+    def result(self) -> SequenceCheck:
+        if not self._starts:
+            return SequenceCheck(count=self.count)
+        gaps = [(end + 1, start - 1) for end, start in zip(self._ends, self._starts[1:])]
+        return SequenceCheck(self.count, self._starts[0], self._ends[-1], gaps, list(self.duplicates))
+
+
+def sequence_check(seqs: Iterable[int]) -> SequenceCheck:
+    tracker = SequenceTracker()
+    for seq in seqs:
+        tracker.add(seq)
+    return tracker.result()
+
+
+def episode_sequence(bag: Path, topic: str = EPISODES_TOPIC) -> SequenceCheck:
+    """The seq values of the bag's EpisodeRecords, checked for gaps and duplicates."""
+    typestore = graph_typestore()
+    tracker = SequenceTracker()
+    with open_bag(bag) as reader:
+        connections = [connection for connection in reader.connections if connection.topic == topic]
+        if connections:  # an empty selection would mean every topic to rosbags
+            for connection, _, data in reader.messages(connections=connections):
+                tracker.add(int(typestore.deserialize_cdr(data, connection.msgtype).seq))
+    return tracker.result()
+
+
+# CDR encapsulation identifiers (the first two bytes of every serialized message).
+_CDR_BE, _CDR_LE = b"\x00\x00", b"\x00\x01"
+
+
+def episode_seq_from_cdr(data: bytes) -> int | None:
+    """EpisodeRecord.seq read straight from its CDR bytes, None for an encoding not handled.
+
+    The recorder checks every episode as it arrives; decoding only the header
+    and seq (a dozen bytes) instead of the whole record (every observation,
+    action and joint position) keeps that check free. Layout after the 4-byte
+    encapsulation header: Header.stamp (int32 sec, uint32 nanosec), frame_id
+    (uint32 length including the NUL, bytes), then seq, a uint64 aligned to 8
+    relative to the end of the encapsulation header. Only classic CDR (XCDR1,
+    what rmw_fastrtps sends) is parsed; anything else returns None and the
+    caller decodes the message fully.
+    """
+    kind = bytes(data[:2])
+    if kind not in (_CDR_BE, _CDR_LE):
+        return None
+    order = "<" if kind == _CDR_LE else ">"
+    (frame_id_length,) = struct.unpack_from(order + "I", data, 4 + 8)
+    offset = 8 + 4 + frame_id_length
+    offset = (offset + 7) & ~7
+    if 4 + offset + 8 > len(data):
+        return None
+    (seq,) = struct.unpack_from(order + "Q", data, 4 + offset)
+    return seq

@@ -2,9 +2,13 @@
 
 Subscribes raw (serialized) to the topics of ``glocal_ros.recording.GRAPH_TOPICS``
 with the QoS their publishers offer, so that messages are written as they
-travelled, and closes the bag cleanly on SIGINT/SIGTERM. Issue "Record,
-replay, report" adds sequence-gap checks, repair of a killed recorder's bag
-and topic discovery.
+travelled, and closes the bag cleanly on SIGINT/SIGTERM.
+
+EpisodeRecord.seq is checked as episodes arrive: every gap (an episode the
+recorder never got) is logged as a warning when it is seen, and the total
+with every gap when the bag closes (``glocal-ros bag check`` does the same
+on a bag afterwards). A recorder that was killed leaves a bag without
+metadata.yaml: ``glocal-ros bag repair`` recovers it.
 """
 
 from __future__ import annotations
@@ -12,10 +16,14 @@ from __future__ import annotations
 import importlib
 from pathlib import Path
 
+from glocal_interfaces.msg import EpisodeRecord
 from rclpy.node import Node
 from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
+from rclpy.serialization import deserialize_message
 
-from glocal_ros.recording import GRAPH_TOPICS, BagWriter, TopicSpec
+from glocal_ros.recording import (
+    EPISODES_TOPIC, GRAPH_TOPICS, BagWriter, SequenceTracker, TopicSpec, episode_seq_from_cdr,
+)
 from node_common.params import declare
 from node_common.runner import spin_node
 
@@ -40,6 +48,7 @@ class RecorderNode(Node):
         super().__init__("recorder_node")
         output = declare(self, "output", "bag", "rosbag2 directory to create (must not exist)")
         self.writer = BagWriter(Path(output))
+        self.episode_seqs = SequenceTracker()
         for spec in GRAPH_TOPICS:
             self.create_subscription(
                 message_class(spec.msgtype), spec.name, self._writer_for(spec.name), subscription_qos(spec), raw=True
@@ -50,12 +59,43 @@ class RecorderNode(Node):
         def write(data: bytes) -> None:
             self.writer.write(topic, self.get_clock().now().nanoseconds, data)
 
-        return write
+        if topic != EPISODES_TOPIC:
+            return write
+
+        def write_and_check(data: bytes) -> None:
+            write(data)  # first: a message that fails the check is still recorded
+            self._check_episode_seq(data)
+
+        return write_and_check
+
+    def _check_episode_seq(self, data: bytes) -> None:
+        """Warn about a gap in EpisodeRecord.seq as soon as it shows.
+
+        The seq is read from the CDR bytes without decoding the record (its
+        arrays can be large); an encoding that parser does not handle is
+        decoded in full instead.
+        """
+        seq = episode_seq_from_cdr(data)
+        if seq is None:
+            seq = deserialize_message(data, EpisodeRecord).seq
+        highest = self.episode_seqs.highest
+        self.episode_seqs.add(seq)
+        if highest is None:
+            if seq:
+                self.get_logger().info(f"first episode has seq {seq}: seq 0..{seq - 1} came before the recording")
+        elif seq > highest + 1:
+            missing = f"{highest + 1}" if seq == highest + 2 else f"{highest + 1}..{seq - 1}"
+            self.get_logger().warning(f"episode seq gap: {missing} missing (got {seq} after {highest})")
+        elif seq <= highest:
+            self.get_logger().warning(f"episode seq {seq} after {highest}: a duplicate or out of order")
 
     def close(self) -> None:
         self.writer.close()
         counts = ", ".join(f"{topic} {count}" for topic, count in self.writer.counts.items() if count)
         self.get_logger().info(f"closed {self.writer.path}: {counts or 'no messages'}")
+        check = self.episode_seqs.result()
+        log = self.get_logger().info if check.ok else self.get_logger().warning
+        log(f"{EPISODES_TOPIC}: {check.summary()}")
 
 
 def main(args=None) -> int:

@@ -1,0 +1,195 @@
+"""Recorded bags: episode seq checks, repair of a killed recorder's bag, replay."""
+
+import signal
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import numpy as np
+import pytest
+from glocal_interfaces.msg import CurriculumState, EpisodeRecord, EvaluationResult
+from rclpy.duration import Duration
+from rclpy.serialization import serialize_message
+from rosbags.highlevel import AnyReader
+from sensor_msgs.msg import JointState
+
+from conftest import REPO, wait_until
+from glocal_ros.recording import BagWriter, episode_seq_from_cdr, episode_sequence, graph_typestore
+from node_common import names, qos
+from node_common.arrays import to_float32_field
+
+GLOCAL_ROS = [sys.executable, "-m", "glocal_ros.cli"]
+JOINTS = ["panda_joint1", "panda_joint2", "panda_finger_joint1"]
+START_NS = 1_700_000_000 * 10**9
+
+
+def run_cli(*args, timeout=60):
+    """``glocal-ros ARGS`` in this test's environment (its ROS domain)."""
+    return subprocess.run([*GLOCAL_ROS, *map(str, args)], capture_output=True, text=True, timeout=timeout, cwd=REPO)
+
+
+def episode(seq: int, values: int = 4, states: int = 0) -> EpisodeRecord:
+    record = EpisodeRecord(seq=seq, task="A0", length=max(states - 1, 0))
+    record.header.frame_id = "world"
+    record.observations = to_float32_field(np.random.default_rng(seq).random(values))
+    record.joint_names = JOINTS
+    record.joint_positions = to_float32_field(seq + np.arange(states * len(JOINTS)) / 100)
+    return record
+
+
+def write_bag(path: Path, messages) -> Path:
+    """A bag as the recorder writes it, from (topic, seconds after the start, rclpy message)."""
+    writer = BagWriter(path)
+    try:
+        for topic, seconds, message in messages:
+            writer.write(topic, START_NS + round(seconds * 1e9), serialize_message(message))
+    finally:
+        writer.close()
+    return path
+
+
+def test_seq_is_read_from_the_cdr_bytes_as_rclpy_writes_them():
+    for frame_id in ("", "w", "world", "seven77", "eight888"):
+        record = episode(2**40 + 3)
+        record.header.frame_id = frame_id
+        assert episode_seq_from_cdr(serialize_message(record)) == 2**40 + 3
+    assert episode_seq_from_cdr(b"\x00\x07\x00\x00" + bytes(40)) is None  # XCDR2: decoded in full instead
+
+
+def test_episode_gaps_are_reported_and_fail_bag_check(tmp_path):
+    with_gaps = write_bag(tmp_path / "gaps", [("/glocal/episodes", 0.1 * s, episode(s)) for s in range(10)
+                                              if s not in (4, 7)])
+    check = episode_sequence(with_gaps)
+    assert (check.count, check.first, check.last, check.gaps, check.duplicates) == (8, 0, 9, [(4, 4), (7, 7)], [])
+    result = run_cli("bag", "check", with_gaps)
+    assert result.returncode == 1, result.stderr
+    assert "/glocal/episodes" in result.stdout and "2 missing in 2 gaps: 4, 7" in result.stdout
+
+    contiguous = write_bag(tmp_path / "contiguous", [("/glocal/episodes", 0.1 * s, episode(s)) for s in range(10)])
+    assert episode_sequence(contiguous).ok
+    result = run_cli("bag", "check", contiguous)
+    assert result.returncode == 0, result.stderr
+    assert "10 episodes, seq 0..9; no gaps" in result.stdout
+
+
+def test_recorder_warns_about_a_gap_as_it_arrives(start_node, ros_node, tmp_path):
+    recorder = start_node("recorder_node", output=str(tmp_path / "bag"))
+    publisher = ros_node.create_publisher(EpisodeRecord, names.EPISODES, qos.EPISODES)
+    wait_until(lambda: publisher.get_subscription_count(), 30, "the recorder's subscription", processes=[recorder])
+    for seq in (0, 1, 2, 5, 6, 6):
+        publisher.publish(episode(seq))
+    assert publisher.wait_for_all_acked(Duration(seconds=10))
+    wait_until(lambda: "episode seq gap: 3..4 missing" in recorder.log(), 10, "the gap warning",
+               processes=[recorder])
+    assert recorder.stop(signal.SIGINT) == 0, recorder.log()
+    assert "6 episodes, seq 0..6; 2 missing in 1 gaps: 3..4; 1 duplicates: 6" in recorder.log()
+
+
+def test_repair_recovers_what_a_killed_recorder_wrote(start_node, ros_node, tmp_path):
+    bag = tmp_path / "bag"
+    recorder = start_node("recorder_node", output=str(bag))
+    publisher = ros_node.create_publisher(EpisodeRecord, names.EPISODES, qos.EPISODES)
+    wait_until(lambda: publisher.get_subscription_count(), 30, "the recorder's subscription", processes=[recorder])
+    # The recorder's writer flushes a chunk per MiB of messages (not configurable in
+    # rosbags): 200 kB episodes fill two chunks, and the last one stays in memory.
+    published = [episode(seq, values=50_000) for seq in range(13)]
+    for record in published:
+        publisher.publish(record)
+    assert publisher.wait_for_all_acked(Duration(seconds=10))
+    mcap = bag / "bag.mcap"
+    sizes = []
+
+    def settled() -> bool:  # written and no longer growing
+        sizes.append(mcap.stat().st_size if mcap.exists() else 0)
+        return sizes[-1] > 500_000 and len(sizes) > 10 and sizes[-10] == sizes[-1]
+
+    wait_until(settled, 20, "the recorder's chunks on disk", processes=[recorder])
+    recorder.process.kill()
+    recorder.process.wait(10)
+    assert not (bag / "metadata.yaml").exists()
+
+    result = run_cli("bag", "repair", bag)
+    assert result.returncode == 0, result.stderr
+    assert "recovered" in result.stdout and "bag.damaged" in result.stdout
+    with AnyReader([bag], default_typestore=graph_typestore()) as reader:
+        connection = next(c for c in reader.connections if c.topic == "/glocal/episodes")
+        assert connection.ext.offered_qos_profiles[0].depth == 1000  # the recorded QoS went along
+        records = [reader.deserialize(raw, c.msgtype) for c, _, raw in reader.messages(connections=[connection])]
+    seqs = [record.seq for record in records]
+    assert 6 <= len(seqs) < len(published) and seqs == list(range(len(seqs)))
+    assert np.array_equal(records[-1].observations, np.asarray(published[len(seqs) - 1].observations))
+    assert (tmp_path / "bag.damaged" / "bag.mcap").stat().st_size == sizes[-1]  # the original, untouched
+
+    metadata = (bag / "metadata.yaml").read_text()
+    result = run_cli("bag", "repair", bag)
+    assert result.returncode == 0 and "intact" in result.stdout, result.stdout + result.stderr
+    assert (bag / "metadata.yaml").read_text() == metadata and not (tmp_path / "bag.damaged.2").exists()
+    assert run_cli("bag", "check", bag).returncode == 0
+
+
+def received(ros_node, message_type, topic, profile):
+    """(arrival time, message) of everything arriving on ``topic``."""
+    arrivals = []
+    ros_node.create_subscription(message_type, topic, lambda m: arrivals.append((time.monotonic(), m)), profile)
+    return arrivals
+
+
+def test_replay_keeps_order_and_timing_and_filters_topics(ros_node, tmp_path):
+    bag = write_bag(tmp_path / "bag", [
+        *[("/glocal/curriculum_state", 0.2 * i, CurriculumState(iteration=i)) for i in range(5)],
+        *[("/glocal/evaluations", 0.3 + 0.2 * i, EvaluationResult(policy=f"p{i}")) for i in range(2)],
+    ])
+    states = received(ros_node, CurriculumState, names.CURRICULUM_STATE, qos.LATCHED)
+    evaluations = received(ros_node, EvaluationResult, names.EVALUATIONS, qos.EVENTS)
+
+    result = run_cli("replay", bag, "--rate", "2", "--wait", "20")
+    assert result.returncode == 0, result.stderr
+    wait_until(lambda: len(states) == 5 and len(evaluations) == 2, 5, "the replayed messages")
+    assert [m.iteration for _, m in states] == [0, 1, 2, 3, 4]
+    assert [m.policy for _, m in evaluations] == ["p0", "p1"]
+    # 0.2 s recorded, at rate 2. The first message can come late (retransmitted)
+    # when the subscriber's side of discovery lags behind the publisher's.
+    gaps = np.diff([t for t, _ in states])[1:]
+    assert all(0.03 < gap < 0.3 for gap in gaps), gaps
+    assert 0.2 < states[-1][0] - states[1][0] < 0.6
+
+    states.clear()
+    result = run_cli("replay", bag, "--topics", "glocal/curriculum_state", "--start-offset", "0.3", "--wait", "20")
+    assert result.returncode == 0, result.stderr
+    wait_until(lambda: len(states) == 3, 5, "the replayed states")
+    assert [m.iteration for _, m in states] == [2, 3, 4] and len(evaluations) == 2
+
+
+def test_replay_of_an_episode_publishes_its_joint_states(ros_node, tmp_path):
+    bag = write_bag(tmp_path / "bag", [("/glocal/episodes", 1.0 * s, episode(s, states=4 + s)) for s in range(3)])
+    joint_states = received(ros_node, JointState, names.JOINT_STATES, qos.VIEWER)
+
+    result = run_cli("replay", bag, "--episode", "1", "--step-period", "0.05", "--wait", "20")
+    assert result.returncode == 0, result.stderr
+    wait_until(lambda: len(joint_states) == 5, 5, "the episode's 5 joint states")
+    rows = np.asarray(episode(1, states=5).joint_positions).reshape(5, len(JOINTS))
+    assert all(list(m.name) == JOINTS for _, m in joint_states)
+    assert np.allclose([m.position for _, m in joint_states], rows)
+    assert all(m.header.stamp.sec > 0 for _, m in joint_states)  # stamped when published
+
+    result = run_cli("replay", bag, "--episode", "7")
+    assert result.returncode == 2 and "no episode with seq 7" in result.stderr
+
+
+def test_default_step_period_is_the_envs_control_period():
+    from recorder_node.replay import default_step_period
+
+    assert default_step_period() == pytest.approx(10 / 240)
+
+
+def test_bad_input_is_a_message_not_a_traceback(tmp_path):
+    result = run_cli("replay", tmp_path / "missing")
+    assert result.returncode == 2 and "no bag directory" in result.stderr and "Traceback" not in result.stderr
+    (tmp_path / "notes").mkdir()
+    (tmp_path / "notes" / "readme.txt").write_text("not a bag")
+    result = run_cli("bag", "repair", tmp_path / "notes")
+    assert result.returncode == 2 and "holds no .mcap file" in result.stderr and "Traceback" not in result.stderr
+    assert (tmp_path / "notes" / "readme.txt").exists() and not (tmp_path / "notes.damaged").exists()
+    result = run_cli("bag", "check", tmp_path / "notes")
+    assert result.returncode == 2 and "no metadata.yaml" in result.stderr
