@@ -47,6 +47,7 @@ from typing import Sequence
 import numpy as np
 from sklearn.exceptions import ConvergenceWarning
 from sklearn.mixture import GaussianMixture
+from threadpoolctl import threadpool_limits
 
 from glocal_ros.tasks import COMPLEXITY_LEVELS, DIFFICULTY_LEVELS, grid_coordinates, validate_tasks
 
@@ -167,7 +168,8 @@ class AlpGmmSampler:
         seed = int(self._rng.integers(2**31 - 1))
         best, best_aic = None, math.inf
         for k in range(min(self.k_min, n_distinct), min(self.k_max, n_distinct) + 1):
-            with warnings.catch_warnings():
+            # 3x3 covariances: BLAS threads only add wake-ups (several times slower on a busy 2-core machine).
+            with warnings.catch_warnings(), threadpool_limits(1):
                 # EM stopping at max_iter on near-duplicate points is expected, not worth a log line.
                 warnings.simplefilter("ignore", ConvergenceWarning)
                 gmm = GaussianMixture(k, covariance_type="full", random_state=seed).fit(data)

@@ -1,0 +1,49 @@
+"""What a curriculum needs of a learner, as a protocol and plain data."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import Protocol, Sequence
+
+
+@dataclass(frozen=True)
+class TrainRequest:
+    """Train ``initial_policy`` into ``output_policy`` (see glocal_interfaces/action/Train.action)."""
+
+    task: str  # whose score decides "learned"; "" when only episode_tasks are trained
+    initial_policy: str
+    output_policy: str
+    step_budget: int
+    threshold: float  # B: learned when the score is above it
+    eval_episodes: int  # S-bar
+    episode_tasks: tuple[str, ...] = ()  # tasks of successive episodes; () trains ``task``
+    eval_interval: int = 0  # env steps between evaluations of ``task``; 0: at the end only
+    stop_when_learned: bool = True
+    keep_replay_buffer: bool = False
+
+
+@dataclass(frozen=True)
+class EpisodeSummary:
+    task: str
+    episode_return: float
+    length: int
+    success: bool
+
+
+@dataclass(frozen=True)
+class TrainResult:
+    learned: bool
+    score: float  # successes in the last evaluation of the task; -1 when none ran
+    steps_used: int  # training env steps
+    episodes: tuple[EpisodeSummary, ...] = ()  # every finished training episode, in order
+
+
+class Learner(Protocol):
+    def evaluate(self, policy: str, tasks: Sequence[str], episodes: int) -> dict[str, float]:
+        """Score ``policy`` on every task: successes out of ``episodes`` runs."""
+
+    def train(self, request: TrainRequest) -> TrainResult:
+        """Train as ``request`` says; blocks until the goal ends."""
+
+    def copy(self, source: str, destination: str) -> None:
+        """Store a copy of policy ``source`` as ``destination``."""

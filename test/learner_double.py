@@ -1,0 +1,101 @@
+"""An honest test double of the learner for curriculum tests: no ROS, no RL.
+
+Every task has a hidden difficulty; a policy is its competence on every task
+(the chance that one evaluation episode succeeds). Training on a task raises
+competence on it at a rate that grows with the competence already there
+and shrinks with difficulty, and spills over to grid neighbours: so the
+order of training matters, as a curriculum assumes. Scores are binomial
+draws from a seeded stream. The double refuses what the real learner
+refuses (unknown policy, empty budget, name clashes on copy).
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from glocal_ros.curriculum.learner import EpisodeSummary, TrainRequest, TrainResult
+from glocal_ros.tasks import ALL_TASKS, grid_coordinates, task_index
+
+
+def grid_difficulty(task: str) -> float:
+    """The letter's difficulty, 0 (A) .. 6/7 (G): hard, never impossible."""
+    return grid_coordinates(task)[0] / 7
+
+
+@dataclass
+class SimulatedLearner:
+    difficulty: dict[str, float] = field(default_factory=lambda: {t: grid_difficulty(t) for t in ALL_TASKS})
+    seed: int = 0
+    learn_rate: float = 2e-4  # per training step, for an easy task from zero competence
+    transfer: float = 0.5  # share of a gain that reaches a grid neighbour at distance 1
+    max_episode_steps: int = 50
+
+    def __post_init__(self):
+        self._rng = np.random.default_rng(self.seed)
+        prior = np.array([0.9 * math.exp(-1.2 * _distance("A0", t)) for t in ALL_TASKS])
+        self.policies: dict[str, np.ndarray] = {"prior": prior}
+        self.calls: list[tuple[str, object]] = []
+
+    def evaluate(self, policy: str, tasks, episodes: int) -> dict[str, float]:
+        self.calls.append(("evaluate", (policy, tuple(tasks))))
+        competence = self._policy(policy)
+        return {t: float(self._rng.binomial(episodes, competence[task_index(t)])) for t in tasks}
+
+    def train(self, request: TrainRequest) -> TrainResult:
+        self.calls.append(("train", request))
+        if request.step_budget < 1:
+            raise ValueError(f"step_budget must be at least 1, got {request.step_budget}")
+        competence = self._policy(request.initial_policy).copy()
+        tasks = list(request.episode_tasks) or [request.task]
+        chunk = request.eval_interval or request.step_budget
+        steps, score, learned, episodes = 0, -1.0, False, []
+        while steps < request.step_budget and not (learned and request.stop_when_learned):
+            chunk_steps = min(chunk, request.step_budget - steps)
+            for task in tasks:
+                self._practise(competence, task, chunk_steps / len(tasks))
+            episodes += self._episodes(competence, tasks, chunk_steps)
+            steps += chunk_steps
+            if request.task:
+                score = float(self._rng.binomial(request.eval_episodes, competence[task_index(request.task)]))
+                learned = score > request.threshold
+        self.policies[request.output_policy] = competence
+        return TrainResult(learned, score, steps, tuple(episodes))
+
+    def copy(self, source: str, destination: str) -> None:
+        self.calls.append(("copy", (source, destination)))
+        if destination in self.policies:
+            raise ValueError(f"policy {destination!r} exists already")
+        self.policies[destination] = self._policy(source).copy()
+
+    def _policy(self, name: str) -> np.ndarray:
+        if name not in self.policies:
+            raise KeyError(f"unknown policy {name!r}")
+        return self.policies[name]
+
+    def _practise(self, competence: np.ndarray, task: str, steps: float) -> None:
+        index = task_index(task)
+        rate = self.learn_rate * (1 - self.difficulty[task]) ** 2 * (competence[index] + 0.02)
+        gain = (1 - competence[index]) * (1 - math.exp(-rate * steps))
+        for other in ALL_TASKS:
+            share = 1.0 if other == task else self.transfer ** _distance(task, other)
+            j = task_index(other)
+            competence[j] = min(1.0, competence[j] + share * gain * (1 - competence[j]))
+
+    def _episodes(self, competence: np.ndarray, tasks: list[str], steps: int) -> list[EpisodeSummary]:
+        episodes, used, turn = [], 0, 0
+        while used < steps:
+            task = tasks[turn % len(tasks)]
+            turn += 1
+            success = bool(self._rng.random() < competence[task_index(task)])
+            length = min(int(self._rng.integers(15, 30)) if success else self.max_episode_steps, steps - used)
+            used += length
+            episodes.append(EpisodeSummary(task, -float(length), length, success))
+        return episodes
+
+
+def _distance(a: str, b: str) -> float:
+    (ra, ca), (rb, cb) = grid_coordinates(a), grid_coordinates(b)
+    return math.hypot(ra - rb, ca - cb)

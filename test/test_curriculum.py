@@ -1,0 +1,270 @@
+"""The strategies of glocal_ros.curriculum against the learner double: the paper's rules, budgets, resuming."""
+
+import math
+
+import pytest
+
+from glocal_ros.clustering import cluster_tasks, split_global_local
+from glocal_ros.curriculum.journal import JournaledLearner, JournalMismatch
+from glocal_ros.curriculum.learner import TrainRequest
+from glocal_ros.curriculum.run import (
+    ROLE_CLUSTER, ROLE_GLOBAL, ROLE_LOCAL, ROLE_SAMPLED, STATUS_FINISHED, Run, RunConfig,
+)
+from glocal_ros.curriculum.strategies import STRATEGIES, run_strategy
+from glocal_ros.tasks import ALL_TASKS
+from learner_double import SimulatedLearner
+
+SMALL = ("A0", "A1", "A2", "B0", "B1", "C0", "C3", "D2", "E5", "G6")
+#: A small budget for tests that run every strategy (ALP-GMM-10 refits its GMMs every 10 episodes).
+SHORT = dict(step_budget=40_000, task_step_budget=8_000, eval_interval=2_000, milestone_interval=10_000,
+             baseline_eval_interval=5_000, baseline_chunk_episodes=20)
+
+
+def config(strategy="glocal", tasks=SMALL, **changes) -> RunConfig:
+    settings = dict(step_budget=600_000, task_step_budget=60_000, eval_interval=5_000, eval_episodes=100,
+                    threshold=75, milestone_interval=100_000, baseline_eval_interval=50_000, seed=3)
+    return RunConfig(strategy, tuple(tasks), **{**settings, **changes})
+
+
+class Recorder:
+    """Observes a run: every state (copied) and assignment."""
+
+    def __init__(self):
+        self.states, self.assignments = [], []
+
+    def state_changed(self, state):
+        self.states.append(_copy(state))
+
+    def assigned(self, assignment):
+        self.assignments.append(assignment)
+
+
+def _copy(state):
+    from copy import deepcopy
+
+    return deepcopy(state)
+
+
+def run(strategy="glocal", learner=None, **changes):
+    learner = learner or SimulatedLearner(seed=1)
+    recorder = Recorder()
+    the_run = Run(config(strategy, **changes), learner, recorder)
+    run_strategy(the_run)
+    return the_run, learner, recorder
+
+
+def trains(learner):
+    return [request for call, request in learner.calls if call == "train"]
+
+
+def test_first_iteration_follows_algorithm_1():
+    the_run, learner, recorder = run()
+    kind, (policy, tasks) = learner.calls[0]
+    assert (kind, policy, tasks) == ("evaluate", "prior", tuple(sorted(SMALL)))
+
+    # Recompute the first decision from the states the run published.
+    first = next(s for s in recorder.states if s.clusters)
+    c1_tasks, c1_scores = first.clusters[0]
+    assert list(c1_scores) == sorted(c1_scores, reverse=True), "C1 is in descending score order"
+    means = [sum(scores) / len(scores) for _, scores in first.clusters]
+    assert means == sorted(means, reverse=True), "clusters by descending mean score"
+    assert first.global_task == c1_tasks[len(c1_tasks) // 2], "the ceil-median"
+    assert first.local_tasks == [t for t in c1_tasks if t != first.global_task]
+
+    requests = trains(learner)
+    assert (requests[0].task, requests[0].initial_policy, requests[0].output_policy) == (
+        first.global_task, "prior", "glocal-seed3.G1")
+    # In an iteration with local tasks, they train as a chain from pi_G,m.
+    m = next(s.iteration for s in recorder.states if len(s.local_tasks) >= 2)
+    decided = next(s for s in recorder.states if s.iteration == m and s.clusters)
+    goals = [r for r, a in zip(requests, recorder.assignments) if a.iteration == m]
+    assert goals[0].task == decided.global_task and goals[0].initial_policy == "glocal-seed3." + f"G{m - 1}"
+    local = goals[1:]
+    assert [r.task for r in local] == decided.local_tasks
+    assert local[0].initial_policy == f"glocal-seed3.G{m}"
+    for before, after in zip(local, local[1:]):
+        learned_before = before.output_policy in the_run.state.learned_policies
+        assert after.initial_policy == (before.output_policy if learned_before else before.initial_policy)
+    # The next iteration evaluates pi_G,m.
+    evaluations = [args for call, args in learner.calls if call == "evaluate"]
+    assert evaluations[m][0] == f"glocal-seed3.G{m}"
+
+
+def test_glocal_learns_tasks_and_stops_when_all_are_learned():
+    the_run, learner, recorder = run(step_budget=5_000_000, task_step_budget=200_000)
+    state = the_run.state
+    assert state.status == STATUS_FINISHED
+    assert sorted(state.learned_tasks) == sorted(SMALL) and not state.remaining_tasks
+    assert state.total_steps < 5_000_000
+    assert state.learned_at_steps == sorted(state.learned_at_steps)
+    assert len(state.learned_policies) == len(state.learned_tasks)
+
+
+def test_an_unlearned_task_returns_to_the_pool():
+    impossible = {t: 0.0 for t in ALL_TASKS} | {"G6": 1.0}  # G6 never improves
+    learner = SimulatedLearner(difficulty=impossible, seed=1)
+    the_run, _, recorder = run(learner=learner, tasks=("A0", "A1", "G6"), step_budget=400_000, max_iter=4)
+    assert "G6" in the_run.state.remaining_tasks and "G6" not in the_run.state.learned_tasks
+    g6_goals = [r for r in trains(learner) if r.task == "G6"]
+    assert len(g6_goals) >= 2, "G6 was offered again in later iterations"
+    assert all(r.step_budget <= 60_000 for r in g6_goals), "the per-task budget bounds every attempt"
+    evaluations = [args[1] for call, args in learner.calls if call == "evaluate"]
+    assert all("G6" in tasks for tasks in evaluations)
+
+
+def test_two_tasks_form_one_cluster():
+    the_run, learner, recorder = run(tasks=("A0", "G6"))
+    first = next(s for s in recorder.states if s.clusters)
+    assert len(first.clusters) == 1 and math.isnan(first.silhouette)
+
+
+def test_a_single_task_is_trained_as_the_global_task():
+    the_run, learner, recorder = run(tasks=("B2",))
+    assert recorder.assignments[0].role == ROLE_GLOBAL and recorder.assignments[0].task == "B2"
+    assert the_run.state.learned_tasks == ["B2"]
+
+
+@pytest.mark.parametrize("score", [0.0, 100.0])
+def test_equal_scores_make_one_cluster_whose_middle_task_goes_first(score):
+    tasks = ["A0", "B1", "C2", "D3", "E4"]
+    clustering = cluster_tasks({t: score for t in tasks})
+    assert len(clustering.clusters) == 1
+    assert split_global_local(clustering.clusters[0]) == ("C2", ["A0", "B1", "D3", "E4"])
+
+
+def test_the_total_budget_is_never_exceeded_and_milestones_are_recorded():
+    for strategy in STRATEGIES:
+        the_run, learner, _ = run(strategy, **SHORT)
+        state = the_run.state
+        assert state.total_steps <= 40_000, strategy
+        assert all(1 <= r.step_budget <= 40_000 for r in trains(learner)), strategy
+        assert state.milestone_steps == [m for m in range(10_000, 40_001, 10_000) if m <= state.total_steps]
+        for milestone, learned in zip(state.milestone_steps, state.milestone_learned):
+            assert learned == sum(1 for s in state.learned_at_steps if s <= milestone)
+        assert state.status == STATUS_FINISHED
+
+
+@pytest.mark.parametrize("strategy", list(STRATEGIES))
+def test_runs_are_deterministic_under_a_seed(strategy):
+    first, _, _ = run(strategy, **SHORT)
+    second, _, _ = run(strategy, **SHORT)
+    assert first.state == second.state
+
+
+def test_baselines_train_one_policy_and_copy_it_for_every_passing_task():
+    for strategy in ("random", "alp_gmm_10", "alp_gmm_250"):
+        the_run, learner, recorder = run(strategy, **SHORT)
+        requests = trains(learner)
+        assert {a.role for a in recorder.assignments} == {ROLE_SAMPLED}
+        assert requests[0].initial_policy == "prior"
+        assert {r.output_policy for r in requests} == {f"{strategy}-seed3.policy"}
+        assert all(r.keep_replay_buffer and not r.task for r in requests)
+        copies = [args for call, args in learner.calls if call == "copy"]
+        assert [destination for _, destination in copies] == the_run.state.learned_policies
+        assert the_run.state.learned_policies == [f"{strategy}-seed3.{t}" for t in the_run.state.learned_tasks]
+    sampled = {t for r in trains(learner) for t in r.episode_tasks}
+    assert sampled <= set(SMALL)
+
+
+def test_random_samples_tasks_uniformly():
+    the_run, learner, _ = run("random", step_budget=2_000_000, baseline_chunk_episodes=100)
+    from collections import Counter
+
+    counts = Counter(t for r in trains(learner) for t in r.episode_tasks)
+    assert set(counts) == set(SMALL)
+    assert max(counts.values()) < 1.3 * min(counts.values())
+
+
+def test_ablations():
+    the_run, learner, recorder = run("glocal_no_global")
+    assert recorder.assignments[0].role == ROLE_CLUSTER
+    first_state = next(s for s in recorder.states if s.clusters)
+    assert recorder.assignments[0].episode_tasks == tuple(first_state.clusters[0][0])
+    assert not first_state.global_task
+
+    chosen = set()
+    for seed in range(6):
+        _, _, recorder = run("glocal_random_cluster", seed=seed, step_budget=100_000)
+        chosen |= {s.chosen_cluster for s in recorder.states if s.clusters}
+    assert len(chosen) > 1, "a random cluster, not always C1"
+
+
+class Killed(Exception):
+    pass
+
+
+class DiesAfter:
+    """A learner that dies (like a killed node) on its ``calls``-th call."""
+
+    def __init__(self, learner, calls):
+        self.learner, self.left = learner, calls
+
+    def __getattr__(self, name):
+        method = getattr(self.learner, name)
+
+        def call(*args):
+            self.left -= 1
+            if self.left < 0:
+                raise Killed()
+            return method(*args)
+
+        return call
+
+
+@pytest.mark.parametrize("strategy", ["glocal", "alp_gmm_250"])
+def test_a_killed_run_resumes_from_its_journal(tmp_path, strategy):
+    settings = SHORT
+    uninterrupted, uninterrupted_learner, _ = run(strategy, **settings)
+
+    journal = tmp_path / "journal.jsonl"
+    cfg = config(strategy, **settings)
+    # The learner outlives the curriculum node (its policies are on disk): one double throughout.
+    learner = SimulatedLearner(seed=1)
+    with pytest.raises(Killed):
+        run_strategy(Run(cfg, JournaledLearner(DiesAfter(learner, 7), journal, {"c": 1})))
+    assert len(journal.read_text().splitlines()) == 1 + 7
+
+    journaled = JournaledLearner(learner, journal, {"c": 1})
+    resumed = Run(cfg, journaled)
+    run_strategy(resumed)
+    assert journaled.replayed == 7
+    assert resumed.state == uninterrupted.state
+    assert len(learner.calls) == len(uninterrupted_learner.calls), "no call was asked twice"
+
+
+def test_a_journal_of_other_settings_is_refused(tmp_path):
+    journal = tmp_path / "journal.jsonl"
+    JournaledLearner(SimulatedLearner(), journal, {"strategy": "glocal"})
+    with pytest.raises(JournalMismatch, match="other settings"):
+        JournaledLearner(SimulatedLearner(), journal, {"strategy": "random"})
+
+
+def test_a_journal_line_cut_by_a_kill_is_dropped(tmp_path):
+    journal = tmp_path / "journal.jsonl"
+    learner = JournaledLearner(SimulatedLearner(), journal, {})
+    learner.evaluate("prior", ["A0"], 10)
+    with open(journal, "a") as stream:
+        stream.write('{"call": "train", "argu')
+    resumed = JournaledLearner(SimulatedLearner(), journal, {})
+    assert resumed.replaying and len(journal.read_text().splitlines()) == 2
+
+
+@pytest.mark.parametrize("changes, message", [
+    (dict(tasks=()), "at least one task"),
+    (dict(tasks=("A0", "A0")), "repeat"),
+    (dict(tasks=("Z9",)), "Z9"),
+    (dict(step_budget=0), "step_budget"),
+    (dict(threshold=100), "threshold"),
+    (dict(k_min=5, k_max=3), "k_min"),
+])
+def test_bad_settings_are_refused(changes, message):
+    with pytest.raises(ValueError, match=message):
+        config(**changes)
+
+
+def test_the_double_refuses_what_the_learner_refuses():
+    learner = SimulatedLearner()
+    with pytest.raises(KeyError):
+        learner.evaluate("nope", ["A0"], 10)
+    with pytest.raises(ValueError):
+        learner.train(TrainRequest("A0", "prior", "x", 0, 75, 100))
