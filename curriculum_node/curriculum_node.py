@@ -1,82 +1,115 @@
-"""curriculum_node: runs a curriculum strategy against the learner.
+"""curriculum_node: runs a curriculum strategy against the learner node.
 
-Publishes ``glocal/curriculum_state`` and ``glocal/task_assignment`` (both
-reliable, transient-local). Calls ``learner/evaluate``.
+``ros2 run glocal_ros curriculum_node --ros-args -p strategy:=glocal`` runs
+one of glocal, random, alp_gmm_250, alp_gmm_10, glocal_no_global,
+glocal_random_cluster (``glocal_ros.curriculum``) through ``learner/train``,
+``learner/evaluate`` and ``learner/copy_policy``, publishes
+``glocal/curriculum_state`` after every decision and ``glocal/task_assignment``
+for every goal (both reliable, transient-local), and ends when the run does:
+exit code 0, or 1 when it failed.
 
-Now: the first decision of GloCAL's Algorithm 1 (evaluate pi_curr on the
-remaining tasks, cluster by score, pick C_1, its global and local tasks),
-published as state and as the global task's assignment; then the node ends,
-exit code 0 (1 when the learner could not be reached). Issue "Curriculum"
-adds the training loop through ``learner/train``, the baselines and
-ablations, and resuming a run.
+The run resumes: every answered learner call is journaled in ``state_dir``
+(``glocal_ros.curriculum.journal``), so a node started again with the same
+parameters and ``state_dir`` goes on where the last one stopped;
+``state_dir/state.json`` holds the latest state for people and scripts.
 """
 
 from __future__ import annotations
 
+import json
+import os
 import threading
 import traceback
+from dataclasses import MISSING, asdict, fields
+from pathlib import Path
 
 from glocal_interfaces.msg import CurriculumState, TaskAssignment, TaskCluster
-from glocal_interfaces.srv import Evaluate
-from rclpy.callback_groups import ReentrantCallbackGroup
 from rclpy.duration import Duration
 from rclpy.node import Node
 
-from glocal_ros.clustering import Clustering, cluster_tasks, split_global_local
+from glocal_ros.curriculum.journal import JournaledLearner
+from glocal_ros.files import atomic_write
+from glocal_ros.curriculum.run import Assignment, Run, RunConfig, RunState
+from glocal_ros.curriculum.strategies import STRATEGIES, run_strategy
 from glocal_ros.tasks import parse_task_list
+from curriculum_node.ros_learner import LearnerStopped, RosLearner
 from node_common import names, qos
-from node_common.calls import ServiceCallError, call_checked, wait_for_service
 from node_common.params import declare
 from node_common.runner import spin_node
 
-STRATEGIES = ("glocal", "random", "alp_gmm_250", "alp_gmm_10", "glocal_no_global", "glocal_random_cluster")
-IMPLEMENTED_STRATEGIES = ("glocal",)
+_DEFAULTS = {f.name: f.default for f in fields(RunConfig) if f.default is not MISSING}
 
 
 class CurriculumNode(Node):
     def __init__(self) -> None:
         super().__init__("curriculum_node")
-        self.strategy = declare(self, "strategy", "glocal", f"one of {', '.join(STRATEGIES)}")
-        if self.strategy not in STRATEGIES:
-            raise ValueError(f"unknown strategy {self.strategy!r}: expected one of {', '.join(STRATEGIES)}")
-        if self.strategy not in IMPLEMENTED_STRATEGIES:
-            raise ValueError(f"strategy {self.strategy!r} is not implemented yet (issue 'Curriculum')")
-        self.tasks = parse_task_list(declare(self, "tasks", "all", "tasks of the run: 'all' or e.g. 'A0,A1,B0'"))
-        self.initial_policy = declare(self, "initial_policy", "prior", "pi_init, the policy every strategy starts from")
-        self.eval_episodes = declare(self, "eval_episodes", 100, "S-bar: evaluation episodes per task",
-                                     min_value=1, max_value=100_000)
-        self.k_min = declare(self, "k_min", 2, "fewest k-means clusters tried", min_value=2, max_value=49)
-        self.k_max = declare(self, "k_max", 6, "most k-means clusters tried", min_value=2, max_value=49)
-        self.seed = declare(self, "seed", 0, "seed of clustering and sampling", min_value=0, max_value=2**31 - 1)
-        self.learner_timeout = declare(self, "learner_timeout_sec", 600.0, "how long to wait for the learner",
+        self.config = self._declare_run_config()
+        self.max_episode_steps = declare(self, "max_episode_steps", 50,
+                                         "T of the sim's envs: the baselines size their goals with it",
+                                         min_value=1, max_value=100_000)
+        self.learner_timeout = declare(self, "learner_timeout_sec", 600.0,
+                                       "how long to wait for the learner to answer a request",
                                        min_value=0.1, max_value=86_400.0)
-        if self.k_min > self.k_max:
-            raise ValueError(f"k_min {self.k_min} is above k_max {self.k_max}")
+        state_dir = declare(self, "state_dir", "", "the run's journal and state.json; "
+                            "default $ROS_HOME/glocal_ros/runs/<strategy>-seed<seed>")
+        self.state_dir = Path(state_dir) if state_dir else default_state_dir(self.config.run_id)
 
-        self.evaluate_client = self.create_client(Evaluate, names.LEARNER_EVALUATE,
-                                                  callback_group=ReentrantCallbackGroup())
         self.state_pub = self.create_publisher(CurriculumState, names.CURRICULUM_STATE, qos.LATCHED)
         self.assignment_pub = self.create_publisher(TaskAssignment, names.TASK_ASSIGNMENT, qos.LATCHED)
-        self.assignment_seq = 0
+        self.learner = RosLearner(self, self.learner_timeout)
+        self.journal = JournaledLearner(self.learner, self.state_dir / "journal.jsonl", asdict(self.config))
+        if self.journal.replaying:
+            self.get_logger().info(f"resuming {self.config.run_id} from {self.journal.path}")
         self.exit_code = 0
-        self.state = CurriculumState(strategy=self.strategy, status=CurriculumState.STATUS_STARTING,
-                                     remaining_tasks=list(self.tasks), current_policy=self.initial_policy)
-        self.publish_state()
         self._worker = threading.Thread(target=self.run, name="curriculum", daemon=True)
         self._worker.start()
 
+    def _declare_run_config(self) -> RunConfig:
+        strategy = declare(self, "strategy", "glocal", f"one of {', '.join(STRATEGIES)}")
+        if strategy not in STRATEGIES:
+            raise ValueError(f"unknown strategy {strategy!r}: expected one of {', '.join(STRATEGIES)}")
+        tasks = parse_task_list(declare(self, "tasks", "all", "tasks of the run: 'all' or e.g. 'A0,A1,B0'"))
+        positive = dict(min_value=1, max_value=10**12)
+        return RunConfig(
+            strategy=strategy,
+            tasks=tuple(tasks),
+            initial_policy=declare(self, "initial_policy", _DEFAULTS["initial_policy"],
+                                   "pi_init, the policy every strategy starts from"),
+            seed=declare(self, "seed", 0, "seed of clustering and sampling", min_value=0, max_value=2**31 - 1),
+            step_budget=declare(self, "step_budget", _DEFAULTS["step_budget"],
+                                "training env steps of the whole run", **positive),
+            task_step_budget=declare(self, "task_step_budget", _DEFAULTS["task_step_budget"],
+                                     "GloCAL: most training env steps per task attempt", **positive),
+            eval_episodes=declare(self, "eval_episodes", _DEFAULTS["eval_episodes"],
+                                  "S-bar: evaluation episodes per task", min_value=1, max_value=100_000),
+            threshold=declare(self, "threshold", _DEFAULTS["threshold"],
+                              "B: a task is learned when its score is above it", min_value=0.0, max_value=1e5),
+            eval_interval=declare(self, "eval_interval", _DEFAULTS["eval_interval"],
+                                  "GloCAL: training env steps between checks of score > B", **positive),
+            k_min=declare(self, "k_min", _DEFAULTS["k_min"], "fewest k-means clusters tried",
+                          min_value=2, max_value=49),
+            k_max=declare(self, "k_max", _DEFAULTS["k_max"], "most k-means clusters tried",
+                          min_value=2, max_value=49),
+            max_iter=declare(self, "max_iter", _DEFAULTS["max_iter"], "GloCAL: most iterations", **positive),
+            milestone_interval=declare(self, "milestone_interval", _DEFAULTS["milestone_interval"],
+                                       "training env steps between milestones", **positive),
+            baseline_eval_interval=declare(self, "baseline_eval_interval", _DEFAULTS["baseline_eval_interval"],
+                                           "baselines: training env steps between evaluations", **positive),
+            baseline_chunk_episodes=declare(self, "baseline_chunk_episodes", _DEFAULTS["baseline_chunk_episodes"],
+                                            "random: episodes per Train goal", **positive),
+        )
+
     def run(self) -> None:
         try:
-            wait_for_service(self.evaluate_client, self.learner_timeout)
-            self.state.iteration = 1
-            self.state.status = CurriculumState.STATUS_EVALUATING
-            self.publish_state()
-            scores = self.evaluate(self.initial_policy, self.state.remaining_tasks)
-            clustering = cluster_tasks(scores, self.k_min, self.k_max, self.seed)
-            self.decide(clustering)
-        except ServiceCallError as error:
-            self.get_logger().fatal(f"curriculum stopped: {error}")
-            self.exit_code = 1
+            self.learner.wait_for_learner()
+            run = Run(self.config, self.journal, self)
+            run_strategy(run, self.max_episode_steps)
+            self.get_logger().info(
+                f"{self.config.run_id} finished: {len(run.state.learned_tasks)}/{len(self.config.tasks)} tasks "
+                f"learned in {run.state.total_steps} training steps"
+            )
+        except LearnerStopped as stopped:
+            self.get_logger().info(f"run interrupted ({stopped}); the same command resumes it")
         except Exception:  # noqa: BLE001 - the run must end the node, not leave it hanging
             self.get_logger().fatal(f"curriculum failed:\n{traceback.format_exc()}")
             self.exit_code = 1
@@ -84,51 +117,63 @@ class CurriculumNode(Node):
 
     def finish(self) -> None:
         """End the node once subscribers (the recorder) have acknowledged the last state."""
-        for publisher in (self.state_pub, self.assignment_pub):
-            publisher.wait_for_all_acked(Duration(seconds=5.0))
+        if self.context.ok():
+            for publisher in (self.state_pub, self.assignment_pub):
+                publisher.wait_for_all_acked(Duration(seconds=5.0))
         # Shutting the context down ends the executor's spin, and so main().
         self.context.try_shutdown()
 
-    def evaluate(self, policy: str, tasks: list[str]) -> dict[str, float]:
-        request = Evaluate.Request(policy=policy, tasks=tasks, episodes=self.eval_episodes, seed=-1)
-        response = call_checked(self.evaluate_client, request, timeout_sec=self.learner_timeout)
-        return {s.task: float(s.successes) for s in response.scores}
+    # RunObserver: what the run reports, published. Replayed decisions were
+    # published by the node that made them, so only live ones go out.
+    def state_changed(self, state: RunState) -> None:
+        if self.journal.replaying:
+            return
+        self.state_pub.publish(state_message(state, self.get_clock().now().to_msg()))
+        text = json.dumps(asdict(state), indent=1).encode()
+        atomic_write(self.state_dir / "state.json", lambda stream: stream.write(text))
 
-    def decide(self, clustering: Clustering) -> None:
-        best = clustering.clusters[0]
-        global_task, local_tasks = split_global_local(best)
-        self.state.silhouette = clustering.silhouette
-        self.state.clusters = [
-            TaskCluster(tasks=list(c.tasks), scores=list(c.scores), mean_score=c.mean_score)
-            for c in clustering.clusters
-        ]
-        self.state.chosen_cluster = 0
-        self.state.global_task, self.state.local_tasks = global_task, local_tasks
-        self.state.current_task = global_task
-        self.state.status = CurriculumState.STATUS_TRAINING_GLOBAL
-        self.publish_state()
-        self.publish_assignment(TaskAssignment.ROLE_GLOBAL, global_task, f"G{self.state.iteration}")
+    def assigned(self, assignment: Assignment) -> None:
+        if self.journal.replaying:
+            return
+        message = TaskAssignment(
+            seq=assignment.seq, iteration=assignment.iteration, role=assignment.role, task=assignment.task,
+            episode_tasks=list(assignment.episode_tasks), initial_policy=assignment.initial_policy,
+            output_policy=assignment.output_policy, step_budget=assignment.step_budget,
+        )
+        message.header.stamp = self.get_clock().now().to_msg()
+        self.assignment_pub.publish(message)
         self.get_logger().info(
-            f"iteration {self.state.iteration}: {len(clustering.clusters)} clusters, "
-            f"C1 = {', '.join(best.tasks)}, global task {global_task}"
+            f"iteration {assignment.iteration}: {assignment.output_policy} from {assignment.initial_policy} on "
+            f"{assignment.task or ','.join(sorted(set(assignment.episode_tasks)))}, {assignment.step_budget} steps"
         )
 
-    def publish_state(self) -> None:
-        self.state.header.stamp = self.get_clock().now().to_msg()
-        self.state_pub.publish(self.state)
 
-    def publish_assignment(self, role: int, task: str, output_policy: str) -> None:
-        assignment = TaskAssignment(
-            seq=self.assignment_seq, iteration=self.state.iteration, role=role, task=task,
-            initial_policy=self.state.current_policy, output_policy=output_policy,
-        )
-        assignment.header.stamp = self.get_clock().now().to_msg()
-        self.assignment_seq += 1
-        self.assignment_pub.publish(assignment)
+def state_message(state: RunState, stamp) -> CurriculumState:
+    message = CurriculumState(
+        run_id=state.run_id, seed=state.seed, strategy=state.strategy, status=state.status,
+        iteration=state.iteration, total_steps=state.total_steps, step_budget=state.step_budget,
+        silhouette=state.silhouette,
+        clusters=[TaskCluster(tasks=list(tasks), scores=list(scores), mean_score=sum(scores) / len(scores))
+                  for tasks, scores in state.clusters],
+        chosen_cluster=state.chosen_cluster, global_task=state.global_task, local_tasks=list(state.local_tasks),
+        current_task=state.current_task, current_policy=state.current_policy,
+        learned_tasks=list(state.learned_tasks), learned_policies=list(state.learned_policies),
+        learned_at_steps=list(state.learned_at_steps), remaining_tasks=list(state.remaining_tasks),
+        milestone_interval=state.milestone_interval, milestone_steps=list(state.milestone_steps),
+        milestone_learned=list(state.milestone_learned),
+    )
+    message.header.stamp = stamp
+    return message
+
+
+def default_state_dir(run_id: str) -> Path:
+    """``$ROS_HOME/glocal_ros/runs/<run_id>`` (ROS_HOME defaults to ~/.ros)."""
+    return Path(os.environ.get("ROS_HOME", Path.home() / ".ros")) / "glocal_ros" / "runs" / run_id
 
 
 def main(args=None) -> int:
-    return spin_node(CurriculumNode, args)
+    # Learner calls block the worker thread while the executor takes their answers.
+    return spin_node(CurriculumNode, args, num_threads=2)
 
 
 if __name__ == "__main__":

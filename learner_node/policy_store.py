@@ -12,13 +12,13 @@ ROS-free; loading a model imports stable-baselines3 (and torch) lazily.
 from __future__ import annotations
 
 import json
-import os
 import re
-import tempfile
 from dataclasses import asdict, dataclass, field
 from datetime import datetime, timezone
 from pathlib import Path
 from typing import Any
+
+from glocal_ros.files import atomic_write
 
 METADATA_FILE = "policy.json"
 _NAME = re.compile(r"^[A-Za-z0-9_][A-Za-z0-9_.-]{0,127}$")
@@ -50,21 +50,6 @@ def check_name(name: str) -> str:
     if not _NAME.match(name):
         raise ValueError(f"invalid policy name {name!r}: letters, digits, '_', '.', '-', at most 128")
     return name
-
-
-def atomic_write(path: Path, write) -> None:
-    """Write ``path`` through ``write(stream)`` on a temporary file, fsync, then an atomic rename."""
-    handle, temporary = tempfile.mkstemp(dir=path.parent, prefix=f".{path.name}.")
-    os.fchmod(handle, 0o644)  # mkstemp's 0600 would hide shared or committed policies from others
-    try:
-        with os.fdopen(handle, "wb") as stream:
-            write(stream)
-            stream.flush()
-            os.fsync(stream.fileno())
-        os.replace(temporary, path)
-    except BaseException:
-        Path(temporary).unlink(missing_ok=True)
-        raise
 
 
 class PolicyStore:

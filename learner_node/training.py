@@ -12,7 +12,9 @@ The loop is stable-baselines3's ``learn`` on a ``BatchVecEnv``; around it:
 - a checkpoint (model, replay buffer, progress) every ``checkpoint_interval``
   steps, so that the same goal sent again after a crash continues from it;
 - the trained model is written to the policy store only when the goal ends
-  by itself (budget spent or learned), never half-way.
+  by itself (budget spent or learned), never half-way; the goal's outcome is
+  kept, so the same goal sent again (its client restarted and lost the
+  result) gets it back instead of training again.
 
 Choices:
 - A goal starts from the stored model with an empty replay buffer (what
@@ -39,15 +41,17 @@ import numpy as np
 from glocal_ros.tasks import validate_tasks
 from learner_node.evaluation import BatchStepper, Score, evaluate
 from learner_node.policies import RANDOM_POLICY, PolicyRegistry
-from learner_node.policy_store import PolicyRecord, atomic_write, check_name
+from glocal_ros.files import atomic_write
+from learner_node.policy_store import PolicyRecord, check_name
 from learner_node.replay_buffer import load_replay_buffer, save_replay_buffer
-from learner_node.sac_settings import SAC_KWARGS, TORCH_THREADS
+from learner_node.sac_settings import SAC_KWARGS, SCHEDULE_KEYS, TORCH_THREADS
 from learner_node.vec_env import BatchVecEnv, FinishedEpisode, TaskCycle
 
 #: B as a share of the evaluation episodes: the paper's 75 of 100.
 DEFAULT_THRESHOLD_FRACTION = 0.75
 DEFAULT_EVAL_EPISODES = 100
 CHECKPOINT_FILE = "checkpoint.json"
+FINISHED_FILE = "finished.json"
 
 
 @dataclass(frozen=True)
@@ -145,6 +149,9 @@ class Trainer:
 
         torch.set_num_threads(TORCH_THREADS)
         checkpoint_dir = self.checkpoint_root / spec.output_policy
+        finished = self._finished_before(spec, checkpoint_dir)
+        if finished is not None:
+            return finished
         state = _GoalState()
         evaluate_now = {"due": False}
 
@@ -160,6 +167,8 @@ class Trainer:
                               policy_name=spec.output_policy, global_step=lambda: self.total_steps,
                               between_steps=between)
         model, resumed = self._model(spec, vec_env, checkpoint_dir, state)
+        for key in SCHEDULE_KEYS:
+            setattr(model, key, SAC_KWARGS[key])
         recent = deque(maxlen=50)
         started, stop_reason = time.monotonic(), ""
         goal_start_timesteps = model.num_timesteps - state.steps_used
@@ -207,13 +216,33 @@ class Trainer:
             return self._outcome(state, False, f"stopped after {state.steps_used} steps: {stop_reason}")
         if spec.task and (state.score is None or state.steps_at_last_eval != state.steps_used):
             self._evaluate_task(model, spec, state)
-        self._store(spec, model, state)
-        shutil.rmtree(checkpoint_dir, ignore_errors=True)
+        stored = self._store(spec, model, state)
         verdict = ("learned" if state.learned else "not learned") if spec.task else "trained"
         message = f"{verdict} after {state.steps_used} steps"
         if resumed:
             message += f" (resumed from a checkpoint at step {resumed})"
+        self._mark_finished(checkpoint_dir, spec, state, stored.model_file)
         return self._outcome(state, True, message)
+
+    def _mark_finished(self, folder: Path, spec: TrainSpec, state: _GoalState, model_file: str) -> None:
+        """Replace the checkpoint by the goal's outcome: a client that lost the result may ask again."""
+        shutil.rmtree(folder, ignore_errors=True)
+        folder.mkdir(parents=True)
+        text = json.dumps({"spec": _spec_key(spec), "state": asdict(state), "model_file": model_file}).encode()
+        atomic_write(folder / FINISHED_FILE, lambda stream: stream.write(text))
+
+    def _finished_before(self, spec: TrainSpec, folder: Path) -> TrainOutcome | None:
+        """The outcome of this very goal when it finished before and its policy is unchanged since."""
+        path = folder / FINISHED_FILE
+        if not path.is_file():
+            return None
+        finished = json.loads(path.read_text())
+        if finished["spec"] != _spec_key(spec) or spec.output_policy not in self.policies.store:
+            return None
+        if self.policies.store.record(spec.output_policy).model_file != finished["model_file"]:
+            return None
+        state = _GoalState(**finished["state"])
+        return self._outcome(state, True, f"finished before, not trained again: {state.steps_used} steps")
 
     def _spaces(self, spec: TrainSpec):
         """The initial policy's spaces: SB3 refuses an env whose Box bounds differ from the model's."""
@@ -250,7 +279,7 @@ class Trainer:
         state.learned = score.successes > spec.threshold
         state.steps_at_last_eval = state.steps_used
 
-    def _store(self, spec: TrainSpec, model, state: _GoalState) -> None:
+    def _store(self, spec: TrainSpec, model, state: _GoalState) -> PolicyRecord:
         parent = self.policies.record(spec.initial_policy)
         record = PolicyRecord(
             name=spec.output_policy, task=spec.task or ",".join(sorted(set(spec.episode_tasks))),
@@ -261,6 +290,7 @@ class Trainer:
         )
         stored = self.policies.store.save(model, record)
         self._warm = (spec.output_policy, str(self.policies.store.root / stored.name / stored.model_file), model)
+        return stored
 
     def _save_checkpoint(self, folder: Path, spec: TrainSpec, model, state: _GoalState) -> None:
         """Model and buffer under new names, then the json naming them: a kill leaves the last whole one."""

@@ -25,6 +25,8 @@ _DOMAIN_ID, _DOMAIN_LOCK = reserve_domain_id()
 os.environ["ROS_DOMAIN_ID"] = str(_DOMAIN_ID)
 os.environ["ROS_AUTOMATIC_DISCOVERY_RANGE"] = "LOCALHOST"
 os.environ["ROS_LOG_DIR"] = tempfile.mkdtemp(prefix="glocal-ros-log-")
+# Nodes keep policies and curriculum journals under ROS_HOME by default: never the user's.
+os.environ["ROS_HOME"] = tempfile.mkdtemp(prefix="glocal-ros-home-")
 os.environ.setdefault("AMENT_PREFIX_PATH", sys.prefix)
 os.environ["PYTHONUNBUFFERED"] = "1"
 

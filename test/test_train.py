@@ -103,7 +103,12 @@ def test_train_stores_the_policy_with_its_score(graph, ros_node):
     trained = stored_policies(ros_node)["trained"]
     assert (trained.task, trained.parent, trained.last_score_task) == ("A0", "prior", "A0")
     assert trained.steps_trained == stored_policies(ros_node)["prior"].steps_trained + result.steps_used
-    assert not (graph["policy_dir"] / ".checkpoints" / "trained").exists()
+    assert not (graph["policy_dir"] / ".checkpoints" / "trained" / "checkpoint.json").exists()
+
+    # The same goal again (a client that lost the result): the outcome, without training again.
+    status, again = Goal(graph["train"], train_goal(step_budget=60, eval_interval=30)).result(30)
+    assert status == GoalStatus.STATUS_SUCCEEDED and "not trained again" in again.message
+    assert (again.steps_used, again.score.successes) == (result.steps_used, result.score.successes)
 
 
 def test_episode_tasks_are_trained_in_turn(graph):

@@ -1,0 +1,258 @@
+"""``glocal-ros bench learner``: SAC env steps/s with updates, in-process vs through sim_node.
+
+For each N, the same Train goal (SAC from the shipped A0 ``prior`` on A0, the
+project's ``SAC_KWARGS``, one torch thread) runs on N envs three ways:
+
+- in-process: the ``Trainer`` here on a ``BatchedEnvs`` here;
+- through sim_node: the same ``Trainer`` here on a ``SimClient`` of a sim_node
+  process (its node spun by an executor in a background thread), which is
+  what learner_node does for a Train goal;
+- learner_node: a real learner_node process, sent the goal on its Train
+  action, timed by the stamps and step counts of its TrainingProgress
+  messages (optional, ``learner_node=False`` leaves it out).
+
+The sim_node runs with its defaults (``workers`` one per core, at most N;
+viewer topics on) but for ``num_envs``, on a ROS domain of its own.
+
+What is timed: the Trainer reports progress after every vector step
+(``progress_interval_sec=0``); between two reports lie one batch of N env
+steps and one gradient step (SB3's ``train_freq=1``, ``gradient_steps=1``).
+The rate is env steps over time from the first report at or after
+``warmup_steps(N)`` (updates start after ``batch_size`` steps of the goal;
+a few dozen more let the first updates settle) to the last report. Loading
+the model, the update-free warm-up, the final evaluation (1 episode) and
+storing the policy are not timed. No checkpoint falls inside a measurement.
+
+Rounds alternate between the two so that load on the shared machine hits
+both alike; the table reports medians and the ratio through ROS / in-process.
+"""
+
+from __future__ import annotations
+
+import os
+import shutil
+import statistics
+import sys
+import tempfile
+import threading
+import time
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Callable, Sequence
+
+from glocal_ros.domain import reserve_domain_id
+from glocal_ros.paths import assets_dir
+from glocal_ros.processes import NodeProcess, isolated_environment
+from learner_node.evaluation import BatchStepper
+from learner_node.policies import PolicyRegistry
+from learner_node.policy_store import PolicyStore
+from learner_node.sac_settings import SAC_KWARGS, TORCH_THREADS
+from learner_node.training import Trainer, TrainSpec
+
+#: Env steps of a goal after the update-free warm-up before the clock starts.
+SETTLE_STEPS = 64
+TASK = "A0"
+INITIAL_POLICY = "prior"
+
+
+@dataclass(frozen=True)
+class LearnerBenchRow:
+    num_envs: int
+    in_process: float  # env steps/s with SAC updates, envs in this process
+    through_ros: float  # env steps/s with SAC updates here, envs in sim_node
+    learner_node: float | None  # env steps/s of a learner_node process's Train goal; None: not measured
+    workers: int  # sim_node's worker processes
+    rounds: tuple[tuple[float, ...], ...] = ()  # every measurement, per variant
+
+    @property
+    def ratio(self) -> float:
+        return self.through_ros / self.in_process
+
+    @property
+    def learner_node_ratio(self) -> float | None:
+        return None if self.learner_node is None else self.learner_node / self.in_process
+
+
+def warmup_steps(num_envs: int) -> int:
+    """Goal steps before the clock starts: updates run from ``batch_size`` steps on."""
+    return SAC_KWARGS["batch_size"] + SETTLE_STEPS + num_envs
+
+
+def train_steps_per_second(envs: BatchStepper, policies: PolicyRegistry, work_dir: Path, output_policy: str,
+                           num_envs: int, steps: int, seed: int = 0) -> float:
+    """Run one Train goal of ``warmup_steps + steps`` env steps; env steps/s over the timed part."""
+    trainer = Trainer(envs, policies, work_dir / ".checkpoints", seed, checkpoint_interval=10**12,
+                      progress_interval_sec=0.0)
+    warmup = warmup_steps(num_envs)
+    spec = TrainSpec(task=TASK, initial_policy=INITIAL_POLICY, output_policy=output_policy,
+                     step_budget=warmup + steps, threshold=0.0, eval_episodes=1, eval_interval=0)
+    marks: list[tuple[float, int]] = []
+    trainer.train(spec, on_progress=lambda progress: marks.append((time.perf_counter(), progress.steps)))
+    return timed_rate(marks, warmup)
+
+
+def timed_rate(marks: Sequence[tuple[float, int]], warmup: int) -> float:
+    """Env steps/s between the first (time, goal steps) mark at or after ``warmup`` and the last."""
+    timed = [(t, s) for t, s in marks if s >= warmup]
+    if len(timed) < 2 or timed[-1][0] <= timed[0][0]:
+        raise RuntimeError(f"too few progress reports after the warm-up ({len(marks)} in all): time more steps")
+    (t0, s0), (t1, s1) = timed[0], timed[-1]
+    return (s1 - s0) / (t1 - t0)
+
+
+class LearnerNodeGoals:
+    """Train goals sent to a learner_node process; timed by its TrainingProgress messages."""
+
+    def __init__(self, node, namespace: str):
+        from glocal_interfaces.action import Train
+        from glocal_interfaces.msg import TrainingProgress
+        from rclpy.action import ActionClient
+
+        from node_common import names, qos
+
+        self._train_type = Train
+        self.client = ActionClient(node, Train, f"{namespace}/{names.LEARNER_TRAIN}")
+        self._progress: list[tuple[str, float, int]] = []  # (output policy, stamp, goal steps)
+        node.create_subscription(TrainingProgress, f"{namespace}/{names.TRAINING_PROGRESS}", self._on_progress,
+                                 qos.EVENTS)
+
+    def _on_progress(self, message) -> None:
+        stamp = message.header.stamp.sec + 1e-9 * message.header.stamp.nanosec
+        self._progress.append((message.output_policy, stamp, message.goal_steps))
+
+    def ready(self) -> bool:
+        return self.client.server_is_ready()
+
+    def steps_per_second(self, output_policy: str, num_envs: int, steps: int, timeout: float) -> float:
+        from action_msgs.msg import GoalStatus
+
+        warmup = warmup_steps(num_envs)
+        goal = self._train_type.Goal(task=TASK, initial_policy=INITIAL_POLICY, output_policy=output_policy,
+                                     step_budget=warmup + steps, eval_episodes=1, eval_interval=0)
+        handle = _wait(self.client.send_goal_async(goal), 30, "the Train goal's acceptance")
+        if not handle.accepted:
+            raise RuntimeError("learner_node rejected the Train goal")
+        result = _wait(handle.get_result_async(), timeout, "the Train result")
+        if result.status != GoalStatus.STATUS_SUCCEEDED:
+            raise RuntimeError(f"the Train goal ended with status {result.status}: {result.result.message}")
+        time.sleep(0.2)  # the last progress message may trail the result
+        return timed_rate([(t, s) for name, t, s in list(self._progress) if name == output_policy], warmup)
+
+
+def _wait(future, timeout: float, what: str):
+    done = threading.Event()
+    future.add_done_callback(lambda _: done.set())
+    if not done.wait(timeout):
+        raise RuntimeError(f"no {what} within {timeout:.0f} s")
+    return future.result()
+
+
+def run_learner_bench(env_counts: Sequence[int], steps: int, rounds: int, learner_node: bool = True,
+                      log: Callable[[str], None] = print) -> list[LearnerBenchRow]:
+    import rclpy
+    from rclpy.executors import SingleThreadedExecutor
+
+    from learner_node.sim_client import SimClient
+    from sim_node.batch import BatchedEnvs
+    from sim_node.grasp_env import GraspEnv
+
+    domain_id, lock = reserve_domain_id()
+    work = Path(tempfile.mkdtemp(prefix="glocal-bench-learner-"))
+    logs = work / "logs"
+    policies = PolicyRegistry(PolicyStore(work / "policies"), [PolicyStore(assets_dir() / "priors")], seed=0)
+    context = rclpy.Context()
+    rclpy.init(context=context, domain_id=domain_id)
+    node = rclpy.create_node("bench_learner", context=context)
+    executor = SingleThreadedExecutor(context=context)
+    executor.add_node(node)
+    stop = threading.Event()
+    spinner = threading.Thread(target=lambda: [executor.spin_once(0.1) for _ in iter(stop.is_set, True)],
+                               daemon=True)
+    spinner.start()
+    rows = []
+    try:
+        for num_envs in env_counts:
+            workers = min(num_envs, os.cpu_count() or 1)
+            namespace = f"/bench{num_envs}"
+            env = isolated_environment(domain_id, logs)
+            processes = [NodeProcess("sim_node", logs, {"num_envs": num_envs, "initial_task": TASK}, env=env,
+                                     extra_args=("-r", f"__ns:={namespace}"))]
+            client = SimClient(node, namespace=namespace)
+            waits: list[tuple[str, Callable[[], bool]]] = [("sim_node's services", client.ready)]
+            variants: list[tuple[str, Callable[[str], float]]] = []
+            batch = BatchedEnvs(lambda i: GraspEnv(TASK), num_envs, TASK)
+            variants.append(("in-process", lambda name: train_steps_per_second(
+                batch, policies, work, name, num_envs, steps)))
+            variants.append(("through sim_node", lambda name: train_steps_per_second(
+                client, policies, work, name, num_envs, steps)))
+            if learner_node:
+                processes.append(NodeProcess(
+                    "learner_node", logs, {"policy_dir": str(work / f"learner-{num_envs}"), "seed": 0,
+                                           "checkpoint_interval": 10_000_000},
+                    env=env, extra_args=("-r", f"__ns:={namespace}")))
+                goals = LearnerNodeGoals(node, namespace)
+                waits.append(("learner_node's Train action", goals.ready))
+                variants.append(("learner_node", lambda name: goals.steps_per_second(
+                    name, num_envs, steps, timeout=60 + 10 * (steps + warmup_steps(num_envs)))))
+            try:
+                for what, ready in waits:
+                    deadline = time.monotonic() + 120
+                    while not ready():
+                        if not all(p.running for p in processes) or time.monotonic() > deadline:
+                            raise RuntimeError(f"no {what}: see the logs in {logs}")
+                        time.sleep(0.1)
+                runs: list[list[float]] = [[] for _ in variants]
+                for round_index in range(rounds):
+                    for run, (name, measure) in zip(runs, variants):
+                        run.append(measure(f"bench-{name.split()[-1]}-{num_envs}-{round_index}"))
+                        log(f"N={num_envs} round {round_index + 1}/{rounds}: {name} {run[-1]:.1f} steps/s")
+                medians = [statistics.median(run) for run in runs]
+                row = LearnerBenchRow(num_envs, medians[0], medians[1], medians[2] if learner_node else None,
+                                      workers, tuple(tuple(run) for run in runs))
+                log(f"N={num_envs}: in-process {row.in_process:.1f} steps/s, through sim_node ({workers} workers) "
+                    f"{row.through_ros:.1f}, ratio {row.ratio:.2f}"
+                    + (f"; learner_node {row.learner_node:.1f}, ratio {row.learner_node_ratio:.2f}"
+                       if learner_node else ""))
+                rows.append(row)
+            finally:
+                batch.close()
+                for process in reversed(processes):
+                    process.stop()
+    finally:
+        stop.set()
+        spinner.join(5)
+        executor.shutdown()
+        node.destroy_node()
+        rclpy.try_shutdown(context=context)
+        lock.close()
+        shutil.rmtree(work, ignore_errors=True)
+    return rows
+
+
+def learner_bench_report(rows: Sequence[LearnerBenchRow], command: str, steps: int, rounds: int) -> str:
+    batch_size = SAC_KWARGS["batch_size"]
+
+    def maybe(value: float | None, digits: int) -> str:
+        return "-" if value is None else f"{value:.{digits}f}"
+
+    lines = [
+        "# bench learner: SAC env steps/s with updates, in-process vs through sim_node",
+        "",
+        f"Command: `{command}`  ",
+        f"{time.strftime('%Y-%m-%d %H:%M')}, Python {sys.version.split()[0]}, {os.cpu_count()} CPU cores. "
+        f"One Train goal per measurement: SAC from `{INITIAL_POLICY}` on {TASK} (batch {batch_size}, "
+        f"{SAC_KWARGS['gradient_steps']} gradient step per batch of N env steps, {TORCH_THREADS} torch thread); "
+        f"{steps} env steps timed after {batch_size} + {SETTLE_STEPS} + N warm-up steps (updates start after "
+        f"{batch_size}); model loading, the warm-up, the final evaluation and storing are not timed. "
+        f"*in-process* and *via sim_node* run the Trainer in the bench process (envs in it, or a sim_node "
+        f"process with its default workers over `sim/step`), timed at every step; *learner_node* sends the goal "
+        f"to a learner_node process, timed by the stamps of its TrainingProgress (about 1 Hz). "
+        f"Median of {rounds} alternating rounds.",
+        "",
+        "| N envs | in-process | via sim_node (workers) | learner_node | ratio sim_node / in-process "
+        "| ratio learner_node / in-process |",
+        "| ---: | ---: | ---: | ---: | ---: | ---: |",
+    ]
+    lines += [f"| {r.num_envs} | {r.in_process:.1f} | {r.through_ros:.1f} ({r.workers}) | {maybe(r.learner_node, 1)} "
+              f"| {r.ratio:.2f} | {maybe(r.learner_node_ratio, 2)} |" for r in rows]
+    return "\n".join(lines) + "\n"

@@ -1,0 +1,97 @@
+"""curriculum_node with the real learner and sim on the smoke preset: every strategy end to end, and resuming.
+
+The smoke budgets are far too small to learn; these tests check that each
+strategy drives the graph to the end of its budget, publishes its state and
+assignments, and that a killed curriculum node resumes its run.
+"""
+
+import json
+import signal
+
+import pytest
+from glocal_interfaces.msg import CurriculumState, TaskAssignment
+
+from conftest import REPO, wait_until
+from glocal_ros.processes import NodeProcess
+from node_common import names, qos
+
+SMOKE = REPO / "assets" / "params" / "smoke.yaml"
+STRATEGIES = ["glocal", "random", "alp_gmm_250", "alp_gmm_10", "glocal_no_global", "glocal_random_cluster"]
+
+
+@pytest.fixture(scope="module")
+def graph(tmp_path_factory):
+    """One sim and one learner for the module; each test runs its own curriculum node."""
+    logs = tmp_path_factory.mktemp("graph")
+    sim = NodeProcess("sim_node", logs, params_file=SMOKE, cwd=REPO)
+    learner = NodeProcess("learner_node", logs, {"policy_dir": str(logs / "policies")}, params_file=SMOKE, cwd=REPO)
+    yield [sim, learner]
+    for process in (learner, sim):
+        process.stop()
+
+
+def curriculum(tmp_path, strategy, **params) -> NodeProcess:
+    params = {"strategy": strategy, "state_dir": str(tmp_path / "state"), "learner_timeout_sec": 120.0, **params}
+    return NodeProcess("curriculum_node", tmp_path, params, params_file=SMOKE, cwd=REPO)
+
+
+@pytest.mark.parametrize("strategy", STRATEGIES)
+def test_every_strategy_runs_to_the_end_of_its_budget(graph, ros_node, tmp_path, strategy):
+    states, assignments = [], []
+    ros_node.create_subscription(CurriculumState, names.CURRICULUM_STATE, states.append, qos.LATCHED)
+    ros_node.create_subscription(TaskAssignment, names.TASK_ASSIGNMENT, assignments.append, qos.LATCHED)
+    node = curriculum(tmp_path, strategy)
+    wait_until(lambda: node.process.poll() is not None, 240, f"the {strategy} run", processes=graph)
+    assert node.process.returncode == 0, node.log()
+
+    wait_until(lambda: states and states[-1].status == CurriculumState.STATUS_FINISHED, 20, "the final state")
+    final = states[-1]
+    assert (final.strategy, final.run_id) == (strategy, f"{strategy}-seed0")
+    assert final.step_budget == 300 and final.total_steps <= 302
+    assert sorted(final.learned_tasks + final.remaining_tasks) == ["A0", "A1", "B0", "C3", "G6"]
+    assert list(final.milestone_steps) == [m for m in (100, 200, 300) if m <= final.total_steps]
+    assert assignments and all(a.output_policy.startswith(f"{strategy}-seed0.") for a in assignments)
+    roles = {a.role for a in assignments}
+    expected = {"glocal": {TaskAssignment.ROLE_GLOBAL}, "glocal_random_cluster": {TaskAssignment.ROLE_GLOBAL},
+                "glocal_no_global": {TaskAssignment.ROLE_CLUSTER}}.get(strategy, {TaskAssignment.ROLE_SAMPLED})
+    assert expected <= roles
+    saved = json.loads((tmp_path / "state" / "state.json").read_text())
+    assert saved["total_steps"] == final.total_steps and saved["status"] == CurriculumState.STATUS_FINISHED
+
+
+def test_a_killed_curriculum_node_resumes_its_run(graph, ros_node, tmp_path):
+    journal = tmp_path / "state" / "journal.jsonl"
+    first = curriculum(tmp_path, "glocal", seed=5)
+    # Killed once it has trained a goal or two (header, evaluation, then goals).
+    wait_until(lambda: journal.is_file() and len(journal.read_text().splitlines()) >= 4, 240,
+               "a journal with two answers", processes=[*graph, first])
+    first.process.send_signal(signal.SIGKILL)
+    first.process.wait()
+    answered = journal.read_text().splitlines()
+
+    states = []
+    ros_node.create_subscription(CurriculumState, names.CURRICULUM_STATE, states.append, qos.LATCHED)
+    second = curriculum(tmp_path, "glocal", seed=5)
+    wait_until(lambda: second.process.poll() is not None, 240, "the resumed run", processes=graph)
+    assert second.process.returncode == 0, second.log()
+    assert "resuming glocal-seed5" in second.log()
+    lines = journal.read_text().splitlines()
+    assert lines[:len(answered)] == answered, "the journal was continued, not rewritten"
+    evaluations_of_prior = [line for line in lines if '"call": "evaluate"' in line and '"policy": "prior"' in line]
+    assert len(evaluations_of_prior) == 1, "the first evaluation was not asked again"
+    wait_until(lambda: states and states[-1].status == CurriculumState.STATUS_FINISHED, 20, "the final state")
+    assert states[-1].total_steps <= 302
+
+
+def test_a_journal_of_other_settings_ends_the_node_with_a_clear_error(graph, tmp_path):
+    (tmp_path / "state").mkdir()
+    (tmp_path / "state" / "journal.jsonl").write_text(json.dumps({"config": {"strategy": "random"}}) + "\n")
+    node = curriculum(tmp_path, "glocal")
+    assert node.process.wait(60) == 1
+    assert "belongs to a run with other settings" in node.log()
+
+
+def test_an_unknown_strategy_is_refused(graph, tmp_path):
+    node = curriculum(tmp_path, "greedy")
+    assert node.process.wait(60) == 1
+    assert "unknown strategy 'greedy'" in node.log()
