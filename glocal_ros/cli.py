@@ -13,6 +13,7 @@ import sys
 from pathlib import Path
 
 from glocal_ros.bag_cli import add_bag_commands
+from glocal_ros.curriculum import STRATEGY_NAMES
 from glocal_ros.paths import assets_dir, objects_dir
 from glocal_ros.tasks import parse_task_list, sorted_tasks
 
@@ -59,6 +60,17 @@ def cmd_launch(args: argparse.Namespace) -> int:
     from node_common.launch import launch
 
     return launch(args.strategy, args.preset, args.seed, args.out)
+
+
+def cmd_experiment(args: argparse.Namespace) -> int:
+    from node_common.launch import experiment
+
+    strategies = [s.strip() for s in args.strategies.split(",") if s.strip()]
+    unknown = [s for s in strategies if s not in STRATEGY_NAMES]
+    if unknown or not strategies:
+        raise ValueError(f"unknown strategies {unknown}: expected some of {', '.join(STRATEGY_NAMES)}")
+    seeds = [int(seed) for seed in args.seeds.split(",")]
+    return experiment(strategies, seeds, args.preset, args.out)
 
 
 def cmd_assets_generate(args: argparse.Namespace) -> int:
@@ -118,6 +130,19 @@ def cmd_bench_sim(args: argparse.Namespace) -> int:
     env_counts = [int(n) for n in args.envs.split(",")]
     rows = run_sim_bench(env_counts, args.batches, args.rounds)
     report = sim_bench_report(rows, "glocal-ros " + " ".join(sys.argv[1:]), args.batches, args.rounds)
+    args.out.parent.mkdir(parents=True, exist_ok=True)
+    args.out.write_text(report)
+    print(report, end="")
+    print(f"written to {args.out}")
+    return 0
+
+
+def cmd_bench_learner(args: argparse.Namespace) -> int:
+    from learner_node.bench import learner_bench_report, run_learner_bench
+
+    env_counts = [int(n) for n in args.envs.split(",")]
+    rows = run_learner_bench(env_counts, args.steps, args.rounds, learner_node=not args.no_learner_node)
+    report = learner_bench_report(rows, "glocal-ros " + " ".join(sys.argv[1:]), args.steps, args.rounds)
     args.out.parent.mkdir(parents=True, exist_ok=True)
     args.out.write_text(report)
     print(report, end="")
@@ -214,6 +239,16 @@ def build_parser() -> argparse.ArgumentParser:
     bench_sim.add_argument("--rounds", type=int, default=3, help="alternating rounds; the median is reported")
     bench_sim.add_argument("--out", type=Path, default=Path("bench/results/sim.md"))
     bench_sim.set_defaults(func=cmd_bench_sim)
+    bench_learner = bench_commands.add_parser("learner", help="SAC env steps/s with updates, in-process vs through "
+                                              "sim_node and learner_node")
+    bench_learner.add_argument("--envs", default="1,2,4", help="comma-separated env counts N")
+    bench_learner.add_argument("--steps", type=int, default=500, help="env steps timed per measurement, after a "
+                               "warm-up of batch_size + 64 + N steps")
+    bench_learner.add_argument("--rounds", type=int, default=3, help="alternating rounds; the median is reported")
+    bench_learner.add_argument("--no-learner-node", action="store_true",
+                               help="leave out the learner_node process (its Train action) column")
+    bench_learner.add_argument("--out", type=Path, default=Path("bench/results/learner.md"))
+    bench_learner.set_defaults(func=cmd_bench_learner)
 
     prior = commands.add_parser("train-prior", help="train the A0 prior (resumable) and store it in assets/priors")
     prior.add_argument("--steps", type=int, default=40_000, help="most SAC env steps")
@@ -224,12 +259,22 @@ def build_parser() -> argparse.ArgumentParser:
     prior.add_argument("--out", type=Path, default=None, help="policy store (default: assets/priors)")
     prior.set_defaults(func=cmd_train_prior)
 
-    launch = commands.add_parser("launch", help="run the whole graph as processes on an isolated ROS domain")
-    launch.add_argument("--strategy", default="glocal")
+    launch = commands.add_parser("launch", help="run the whole graph as processes on an isolated ROS domain; "
+                                 "the same command resumes an interrupted run")
+    launch.add_argument("--strategy", default="glocal", choices=STRATEGY_NAMES)
     launch.add_argument("--preset", default="demo", help="a parameter file of assets/params: smoke, demo, paper")
     launch.add_argument("--seed", type=int, default=0)
-    launch.add_argument("--out", type=Path, required=True, help="run directory: gets bag/ and logs/")
+    launch.add_argument("--out", type=Path, required=True,
+                        help="run directory: gets bag/, policies/, curriculum/, logs/ and report/")
     launch.set_defaults(func=cmd_launch)
+
+    experiment = commands.add_parser("experiment", help="strategies x seeds as separate runs (resumable), "
+                                     "then one report")
+    experiment.add_argument("--strategies", default=",".join(STRATEGY_NAMES), help="comma-separated")
+    experiment.add_argument("--seeds", default="0,1,2", help="comma-separated")
+    experiment.add_argument("--preset", default="smoke", help="a parameter file of assets/params")
+    experiment.add_argument("--out", type=Path, required=True, help="gets <strategy>-seed<N>/ per run and report/")
+    experiment.set_defaults(func=cmd_experiment)
     add_report_command(commands)
     add_bag_commands(commands)
     return parser

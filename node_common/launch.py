@@ -1,21 +1,30 @@
-"""``glocal-ros launch``: the whole graph as processes on an isolated ROS domain.
+"""``glocal-ros launch`` and ``glocal-ros experiment``: the whole graph as processes on an isolated ROS domain.
 
-Starts recorder, sim and learner, waits until the recorder listens to the
-episode stream, then starts the curriculum and follows its state until the
+``launch`` starts recorder, sim and learner, waits until the recorder
+listens to the episode stream, then starts the curriculum and shows its
+progress (training steps, learned objects, current task) until the
 curriculum node ends. The other nodes are then stopped in reverse order with
-SIGINT, so the bag is closed cleanly; Ctrl-C does the same at any time.
-RUN_DIR gets ``bag/`` (a new ``bag.N/`` if one exists), ``policies/`` (the
-learner's policy store) and ``logs/``.
+SIGINT, so the bag is closed cleanly, and the report is written from the
+run's bags. Ctrl-C does the same at any time, and the same command resumes
+the run: RUN_DIR keeps the curriculum's journal (``curriculum/``), the
+learner's policies and checkpoints (``policies/``), one bag per launch
+(``bag/``, ``bag.1/``, ...), ``logs/`` and ``report/``.
+
+``experiment`` runs strategies x seeds as separate launches into
+``OUT/<strategy>-seed<N>/``, skips runs already finished, resumes the others,
+then writes one report over all of them.
 """
 
 from __future__ import annotations
 
+import json
 import signal
 import time
 from pathlib import Path
+from typing import Sequence
 
 import rclpy
-from glocal_interfaces.msg import CurriculumState
+from glocal_interfaces.msg import CurriculumState, TrainingProgress
 
 from glocal_ros.domain import reserve_domain_id
 from glocal_ros.paths import assets_dir
@@ -25,6 +34,7 @@ from node_common import names, qos
 
 STATUS_NAMES = {value: name.removeprefix("STATUS_").lower() for name, value in vars(CurriculumState).items()
                 if name.startswith("STATUS_")}
+RUN_FILE = "run.json"
 
 
 def preset_file(preset: str) -> Path:
@@ -53,19 +63,80 @@ def describe(state: CurriculumState) -> str:
     return text + f", learned {len(state.learned_tasks)}/{len(state.learned_tasks) + len(state.remaining_tasks)}"
 
 
-def launch(strategy: str, preset: str, seed: int, run_dir: Path, startup_timeout: float = 120.0) -> int:
-    params_file = preset_file(preset)
+def claim_run_dir(run_dir: Path, strategy: str, preset: str, seed: int) -> bool:
+    """Record what RUN_DIR runs; True when it resumes an earlier launch. Another run's directory is refused."""
+    path = run_dir / RUN_FILE
+    wanted = {"strategy": strategy, "preset": preset, "seed": seed}
+    if path.is_file():
+        found = json.loads(path.read_text())
+        if found != wanted:
+            raise ValueError(f"{run_dir} holds the run {found}, not {wanted}: choose another --out")
+        return True
     run_dir.mkdir(parents=True, exist_ok=True)
+    path.write_text(json.dumps(wanted) + "\n")
+    return False
+
+
+def run_finished(run_dir: Path) -> bool:
+    state = run_dir / "curriculum" / "state.json"
+    return state.is_file() and json.loads(state.read_text())["status"] == CurriculumState.STATUS_FINISHED
+
+
+class Progress:
+    """A progress bar over the run's training steps: learned objects and the current task beside it."""
+
+    def __init__(self):
+        from tqdm import tqdm
+
+        self.bar = tqdm(total=0, unit="step", desc="training", dynamic_ncols=True)
+        self.state: CurriculumState | None = None
+        self.goal_steps = 0
+        self.shown_iteration = None
+
+    def on_state(self, state: CurriculumState) -> None:
+        if state.iteration != self.shown_iteration and state.clusters:
+            self.shown_iteration = state.iteration
+            self.bar.write(describe(state))
+        self.state, self.goal_steps = state, 0
+        self._draw()
+
+    def on_progress(self, progress: TrainingProgress) -> None:
+        self.goal_steps = progress.goal_steps
+        self._draw()
+
+    def _draw(self) -> None:
+        state = self.state
+        if state is None:
+            return
+        self.bar.total = state.step_budget
+        self.bar.n = min(state.total_steps + self.goal_steps, state.step_budget)
+        total = len(state.learned_tasks) + len(state.remaining_tasks)
+        self.bar.set_postfix_str(f"learned {len(state.learned_tasks)}/{total}, iteration {state.iteration}, "
+                                 f"{STATUS_NAMES.get(state.status, state.status)} {state.current_task}".rstrip(),
+                                 refresh=True)
+
+    def close(self) -> None:
+        self.bar.close()
+        if self.state is not None:
+            print(describe(self.state))
+
+
+def launch(strategy: str, preset: str, seed: int, run_dir: Path, startup_timeout: float = 120.0,
+           report: bool = True) -> int:
+    params_file = preset_file(preset)
+    resumed = claim_run_dir(run_dir, strategy, preset, seed)
     logs = run_dir / "logs"
     bag = new_bag_path(run_dir)
     domain_id, domain_lock = reserve_domain_id()
     env = isolated_environment(domain_id, logs)
-    print(f"launching preset {preset}, strategy {strategy}, seed {seed} on ROS_DOMAIN_ID {domain_id}; logs in {logs}")
+    print(f"{'resuming' if resumed else 'launching'} preset {preset}, strategy {strategy}, seed {seed} "
+          f"on ROS_DOMAIN_ID {domain_id}; logs in {logs}", flush=True)
 
     rclpy.init(domain_id=domain_id)
     node = rclpy.create_node("glocal_ros_launch")
-    states: list[CurriculumState] = []
-    node.create_subscription(CurriculumState, names.CURRICULUM_STATE, states.append, qos.LATCHED)
+    progress = Progress()
+    node.create_subscription(CurriculumState, names.CURRICULUM_STATE, progress.on_state, qos.LATCHED)
+    node.create_subscription(TrainingProgress, names.TRAINING_PROGRESS, progress.on_progress, qos.EVENTS)
     started: list[NodeProcess] = []
 
     def start(name: str, **params) -> NodeProcess:
@@ -84,17 +155,19 @@ def launch(strategy: str, preset: str, seed: int, run_dir: Path, startup_timeout
             failed = [p for p in started if not p.running]
             if failed or time.monotonic() > deadline:
                 raise RuntimeError(f"{(failed or started)[0].node} did not start: see {(failed or started)[0].log_path}")
-        curriculum = start("curriculum_node", strategy=strategy, seed=seed)
-        shown = 0
+        curriculum = start("curriculum_node", strategy=strategy, seed=seed, state_dir=str(run_dir / "curriculum"))
         while curriculum.running:
             rclpy.spin_once(node, timeout_sec=0.2)
-            for state in states[shown:]:
-                print(describe(state), flush=True)
-            shown = len(states)
+        for _ in range(5):  # the last state may still be on its way
+            rclpy.spin_once(node, timeout_sec=0.1)
+        progress.close()
         exit_code = curriculum.process.returncode
-        print(f"curriculum_node ended with exit code {exit_code}")
+        if exit_code:
+            print(f"curriculum_node ended with exit code {exit_code}: see {curriculum.log_path}")
     except KeyboardInterrupt:
-        print("interrupted: stopping the graph")
+        progress.close()
+        print("interrupted: stopping the graph; the same command resumes the run")
+        exit_code = 130
     finally:
         for process in reversed(started):
             code = process.stop(signal.SIGINT)
@@ -108,5 +181,39 @@ def launch(strategy: str, preset: str, seed: int, run_dir: Path, startup_timeout
         counts = ", ".join(f"{topic} {count}" for topic, count in message_counts(bag).items() if count)
         print(f"bag: {bag} ({counts})")
     else:
-        print(f"bag: {bag} was not closed (see the recorder's log)")
+        print(f"bag: {bag} was not closed (see the recorder's log); `glocal-ros bag repair {bag}` recovers it")
+    if report:
+        write_run_report([run_dir], run_dir / "report")
     return exit_code
+
+
+def write_run_report(run_dirs: Sequence[Path], out_dir: Path) -> None:
+    from glocal_ros.analysis.report import write_report
+
+    try:
+        path = write_report(run_dirs, out_dir)
+    except ValueError as error:
+        print(f"no report: {error}")
+        return
+    print(f"report: {path}")
+
+
+def experiment(strategies: Sequence[str], seeds: Sequence[int], preset: str, out: Path) -> int:
+    """Every strategy x seed as its own run under ``out``; finished runs are kept, others (re)launched."""
+    run_dirs, failed = [], []
+    for strategy in strategies:
+        for seed in seeds:
+            run_dir = out / f"{strategy}-seed{seed}"
+            run_dirs.append(run_dir)
+            if run_finished(run_dir):
+                print(f"{run_dir.name}: finished before")
+                continue
+            code = launch(strategy, preset, seed, run_dir, report=False)
+            if code == 130:
+                return code
+            if code:
+                failed.append(run_dir.name)
+    write_run_report(run_dirs, out / "report")
+    if failed:
+        print(f"failed runs: {', '.join(failed)} (the same command retries them)")
+    return 1 if failed else 0

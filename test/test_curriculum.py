@@ -268,3 +268,9 @@ def test_the_double_refuses_what_the_learner_refuses():
         learner.evaluate("nope", ["A0"], 10)
     with pytest.raises(ValueError):
         learner.train(TrainRequest("A0", "prior", "x", 0, 75, 100))
+
+
+def test_every_named_strategy_exists():
+    from glocal_ros.curriculum import STRATEGY_NAMES
+
+    assert tuple(STRATEGIES) == STRATEGY_NAMES

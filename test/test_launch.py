@@ -1,37 +1,88 @@
-"""`glocal-ros launch --preset smoke`: the graph starts, decides, records, and stops cleanly."""
+"""`glocal-ros launch` and `experiment` on the smoke preset: runs, records, reports, resumes."""
 
+import signal
 import subprocess
 import sys
+import time
 
 from rosbags.highlevel import AnyReader
 
 from conftest import REPO
-from glocal_ros.recording import graph_typestore
+from glocal_ros.recording import episode_sequence, graph_typestore
+
+CLI = [sys.executable, "-m", "glocal_ros.cli"]
 
 
-def test_smoke_launch_records_the_run(tmp_path):
+def launch(run_dir, *args, timeout=300):
+    return subprocess.run([*CLI, "launch", "--preset", "smoke", "--out", str(run_dir), *args],
+                          capture_output=True, text=True, timeout=timeout, cwd=REPO)
+
+
+def read(bag, topic):
+    with AnyReader([bag], default_typestore=graph_typestore()) as reader:
+        return [reader.deserialize(raw, c.msgtype) for c, _, raw in reader.messages() if c.topic == topic]
+
+
+def test_smoke_launch_records_the_run_and_reports_it(tmp_path):
     run_dir = tmp_path / "run"
-    result = subprocess.run(
-        [sys.executable, "-m", "glocal_ros.cli", "launch", "--preset", "smoke", "--seed", "1", "--out", str(run_dir)],
-        capture_output=True, text=True, timeout=300, cwd=REPO,
-    )
+    result = launch(run_dir, "--seed", "1")
     assert result.returncode == 0, result.stdout + result.stderr
-    assert "training_global" in result.stdout and "global task" in result.stdout
+    assert "global task" in result.stdout and f"report: {run_dir / 'report' / 'report.md'}" in result.stdout
 
-    with AnyReader([run_dir / "bag"], default_typestore=graph_typestore()) as reader:
-        states = [reader.deserialize(raw, c.msgtype) for c, _, raw in reader.messages()
-                  if c.topic == "/glocal/curriculum_state"]
-        episodes = [reader.deserialize(raw, c.msgtype) for c, _, raw in reader.messages()
-                    if c.topic == "/glocal/episodes"]
-    assert states[-1].global_task and states[-1].iteration == 1
-    assert [e.seq for e in episodes] == list(range(len(episodes)))
-    evaluated = [e for e in episodes if e.phase == 1 and not e.interrupted]
-    assert {e.task for e in evaluated} == {"A0", "A1", "B0", "C3", "G6"}
+    states = read(run_dir / "bag", "/glocal/curriculum_state")
+    assert states[-1].status == 5 and states[-1].run_id == "glocal-seed1"
+    check = episode_sequence(run_dir / "bag")
+    assert check.ok and check.first == 0 and check.count > 0, check.summary()
+    evaluated = {e.task for e in read(run_dir / "bag", "/glocal/episodes") if e.phase == 1 and not e.interrupted}
+    assert evaluated == {"A0", "A1", "B0", "C3", "G6"}
+    report = (run_dir / "report" / "report.md").read_text()
+    assert "glocal" in report and (run_dir / "report" / "learned_vs_steps.png").stat().st_size > 1000
 
-    # A second launch into the same run directory keeps the first bag.
-    again = subprocess.run(
-        [sys.executable, "-m", "glocal_ros.cli", "launch", "--preset", "smoke", "--out", str(run_dir)],
-        capture_output=True, text=True, timeout=300, cwd=REPO,
-    )
+    # The same command again: the run is finished; it is replayed from the journal, not trained again.
+    again = launch(run_dir, "--seed", "1")
     assert again.returncode == 0, again.stdout + again.stderr
-    assert (run_dir / "bag.1" / "metadata.yaml").is_file() and (run_dir / "bag" / "metadata.yaml").is_file()
+    assert (run_dir / "bag.1" / "metadata.yaml").is_file()
+    assert not read(run_dir / "bag.1", "/glocal/task_assignment"), "no goal was sent again"
+
+    refused = launch(run_dir, "--seed", "2")
+    assert refused.returncode == 2 and "holds the run" in refused.stderr
+
+
+def test_ctrl_c_leaves_a_valid_bag_and_the_same_command_resumes(tmp_path):
+    run_dir = tmp_path / "run"
+    command = [*CLI, "launch", "--preset", "smoke", "--strategy", "random", "--out", str(run_dir)]
+    process = subprocess.Popen(command, stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True, cwd=REPO)
+    journal = run_dir / "curriculum" / "journal.jsonl"
+    deadline = time.monotonic() + 180
+    while not (journal.is_file() and len(journal.read_text().splitlines()) >= 3):
+        assert process.poll() is None and time.monotonic() < deadline, process.stdout.read()
+        time.sleep(0.2)
+    process.send_signal(signal.SIGINT)
+    output, _ = process.communicate(timeout=120)
+    assert process.returncode == 130, output
+    assert "the same command resumes" in output
+    assert episode_sequence(run_dir / "bag").ok
+    interrupted = read(run_dir / "bag", "/glocal/curriculum_state")[-1]
+    assert interrupted.status != 5
+
+    resumed = subprocess.run(command, capture_output=True, text=True, timeout=300, cwd=REPO)
+    assert resumed.returncode == 0, resumed.stdout + resumed.stderr
+    assert resumed.stdout.startswith("resuming")
+    final = read(run_dir / "bag.1", "/glocal/curriculum_state")[-1]
+    assert final.status == 5 and final.total_steps >= interrupted.total_steps
+    assert (run_dir / "report" / "report.md").is_file()
+
+
+def test_experiment_runs_each_strategy_and_seed_then_reports(tmp_path):
+    out = tmp_path / "experiment"
+    command = [*CLI, "experiment", "--strategies", "random,glocal", "--seeds", "0", "--preset", "smoke",
+               "--out", str(out)]
+    result = subprocess.run(command, capture_output=True, text=True, timeout=600, cwd=REPO)
+    assert result.returncode == 0, result.stdout + result.stderr
+    for run in ("random-seed0", "glocal-seed0"):
+        assert (out / run / "bag" / "metadata.yaml").is_file()
+    report = (out / "report" / "report.md").read_text()
+    assert "random" in report and "glocal" in report
+
+    again = subprocess.run(command, capture_output=True, text=True, timeout=120, cwd=REPO)
+    assert again.returncode == 0 and again.stdout.count("finished before") == 2, again.stdout
