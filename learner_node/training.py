@@ -8,7 +8,9 @@ between steps (evaluations others asked for).
 The loop is stable-baselines3's ``learn`` on a ``BatchVecEnv``; around it:
 - evaluation of ``task`` every ``eval_interval`` env steps and at the end,
   the paper's score (successes out of ``eval_episodes``, deterministic);
-  learned means score > threshold (the paper's "above B");
+  learned means score > threshold (the paper's "above B"); a goal that
+  stops when learned checks before its first step too, as "train until
+  S > B" does, and stores the initial policy unchanged when it passes;
 - a checkpoint (model, replay buffer, progress) every ``checkpoint_interval``
   steps, so that the same goal sent again after a crash continues from it;
 - the trained model is written to the policy store only when the goal ends
@@ -169,6 +171,9 @@ class Trainer:
         model, resumed = self._model(spec, vec_env, checkpoint_dir, state)
         for key in SCHEDULE_KEYS:
             setattr(model, key, SAC_KWARGS[key])
+        if spec.stop_when_learned and spec.task and state.score is None:
+            # "Train until S > B" checks first: a policy that passes already is not trained.
+            self._evaluate_task(model, spec, state)
         recent = deque(maxlen=50)
         started, stop_reason = time.monotonic(), ""
         goal_start_timesteps = model.num_timesteps - state.steps_used

@@ -52,6 +52,9 @@ class SimulatedLearner:
         tasks = list(request.episode_tasks) or [request.task]
         chunk = request.eval_interval or request.step_budget
         steps, score, learned, episodes = 0, -1.0, False, []
+        if request.task and request.stop_when_learned:  # "until S > B" checks first, as the learner does
+            score = float(self._rng.binomial(request.eval_episodes, competence[task_index(request.task)]))
+            learned = score > request.threshold
         while steps < request.step_budget and not (learned and request.stop_when_learned):
             chunk_steps = min(chunk, request.step_budget - steps)
             for task in tasks:

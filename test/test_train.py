@@ -184,3 +184,24 @@ def test_a_second_goal_is_rejected_while_one_runs(graph):
     first.handle.cancel_goal_async()
     status, _ = first.result(60)
     assert status == GoalStatus.STATUS_CANCELED
+
+
+def test_a_policy_that_passes_already_is_stored_without_training(tmp_path):
+    """In-process (T = 50, where the prior grasps A0): the check before the first step."""
+    from glocal_ros.paths import assets_dir
+    from learner_node.policies import PolicyRegistry
+    from learner_node.policy_store import PolicyStore
+    from learner_node.training import Trainer, TrainSpec
+    from sim_node.batch import BatchedEnvs
+    from sim_node.grasp_env import GraspEnv
+
+    envs = BatchedEnvs(lambda i: GraspEnv("A0"), 2, "A0")
+    policies = PolicyRegistry(PolicyStore(tmp_path / "store"), [PolicyStore(assets_dir() / "priors")])
+    try:
+        outcome = Trainer(envs, policies, tmp_path / "checkpoints").train(TrainSpec(
+            "A0", "prior", "a0", step_budget=1_000, threshold=0, eval_episodes=4, eval_interval=500,
+            stop_when_learned=True))
+    finally:
+        envs.close()
+    assert outcome.learned and outcome.steps_used == 0 and outcome.score.successes > 0
+    assert policies.record("a0").steps_trained == policies.record("prior").steps_trained

@@ -13,9 +13,10 @@ episode's task in turn) and that cluster policy, not a global task's, is
 the prior for the local tasks and for the next iteration.
 
 Choices the paper leaves open, made here:
-- "Train until S > B" checks the score every ``eval_interval`` training
-  steps (and at the end of the task's budget); the goal stops at the first
-  check that passes.
+- "Train until S > B" checks the score before training, then every
+  ``eval_interval`` training steps and at the end of the task's budget; the
+  goal stops at the first check that passes (a task its starting policy
+  already grasps costs one evaluation and no training).
 - pi_G,m is the policy trained on the global task even when the task was not
   learned within its budget: the paper's pi_G,m is "pi_curr after that
   training session".
