@@ -91,3 +91,18 @@ def wait_until(predicate, timeout: float, what: str, poll: float = 0.05, process
         time.sleep(poll)
     logs = "\n".join(f"--- {p.node} ---\n{p.log()}" for p in processes)
     pytest.fail(f"timed out after {timeout} s waiting for {what}\n{logs}")
+
+
+def answers(client, request, timeout: float = 5.0) -> bool:
+    """Whether ``client``'s service answers ``request`` within ``timeout``.
+
+    A client can see a service as ready before the server has matched the
+    client's response reader; a request sent then is answered into the void.
+    Fixtures wait until a harmless request comes back before a test starts.
+    """
+    from node_common.calls import call
+
+    try:
+        return call(client, request, timeout) is not None
+    except Exception:  # noqa: BLE001 - not answered yet
+        return False

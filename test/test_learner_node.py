@@ -4,7 +4,7 @@ import pytest
 from glocal_interfaces.msg import EvaluationResult
 from glocal_interfaces.srv import CopyPolicy, Evaluate, ListPolicies
 
-from conftest import wait_until
+from conftest import answers, wait_until
 from node_common import names, qos
 from node_common.calls import call
 
@@ -30,7 +30,8 @@ def learner(start_node, ros_node, policy_dir):
     sim = start_node("sim_node", num_envs=2, max_steps=10)
     learner = start_node("learner_node", max_eval_episodes=50, policy_dir=str(policy_dir))
     evaluate = ros_node.create_client(Evaluate, names.LEARNER_EVALUATE)
-    wait_until(evaluate.service_is_ready, 60, "learner/evaluate", processes=[sim, learner])
+    probe = Evaluate.Request(policy="random", tasks=["A0"], episodes=1)
+    wait_until(lambda: answers(evaluate, probe), 60, "an answer from learner/evaluate", processes=[sim, learner])
     return learner, evaluate
 
 

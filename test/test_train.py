@@ -14,7 +14,7 @@ from glocal_interfaces.msg import TrainingProgress
 from glocal_interfaces.srv import Evaluate, ListPolicies
 from rclpy.action import ActionClient
 
-from conftest import wait_until
+from conftest import answers, wait_until
 from node_common import names, qos
 from node_common.calls import call
 
@@ -63,7 +63,8 @@ def graph(start_node, ros_node, tmp_path):
         wait_until(train.server_is_ready, 60, "learner/train", processes=[sim, learner])
         # After a restart the killed learner's endpoints linger in discovery:
         # an answered request proves that this one is matched.
-        wait_until(lambda: answers(evaluate), 60, "an answer from the new learner", processes=[sim, learner])
+        probe = Evaluate.Request(policy="random", tasks=["A0"], episodes=1)
+        wait_until(lambda: answers(evaluate, probe), 60, "an answer from the new learner", processes=[sim, learner])
         return learner
 
     train = ActionClient(ros_node, Train, names.LEARNER_TRAIN)
@@ -71,13 +72,6 @@ def graph(start_node, ros_node, tmp_path):
     learner = start_learner()
     return dict(sim=sim, learner=learner, start_learner=start_learner, train=train, evaluate=evaluate,
                 policy_dir=policy_dir)
-
-
-def answers(client) -> bool:
-    try:
-        return call(client, Evaluate.Request(policy="random", tasks=["A0"], episodes=1), 5).success
-    except Exception:  # noqa: BLE001 - not answered yet
-        return False
 
 
 def stored_policies(ros_node) -> dict:
