@@ -242,7 +242,7 @@ def build_parser() -> argparse.ArgumentParser:
     bench_learner = bench_commands.add_parser("learner", help="SAC env steps/s with updates, in-process vs through "
                                               "sim_node and learner_node")
     bench_learner.add_argument("--envs", default="1,2,4", help="comma-separated env counts N")
-    bench_learner.add_argument("--steps", type=int, default=500, help="env steps timed per measurement, after a "
+    bench_learner.add_argument("--steps", type=int, default=300, help="env steps timed per measurement, after a "
                                "warm-up of batch_size + 64 + N steps")
     bench_learner.add_argument("--rounds", type=int, default=3, help="alternating rounds; the median is reported")
     bench_learner.add_argument("--no-learner-node", action="store_true",

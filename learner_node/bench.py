@@ -16,15 +16,17 @@ viewer topics on) but for ``num_envs``, on a ROS domain of its own.
 
 What is timed: the Trainer reports progress after every vector step
 (``progress_interval_sec=0``); between two reports lie one batch of N env
-steps and one gradient step (SB3's ``train_freq=1``, ``gradient_steps=1``).
-The rate is env steps over time from the first report at or after
-``warmup_steps(N)`` (updates start after ``batch_size`` steps of the goal;
-a few dozen more let the first updates settle) to the last report. Loading
-the model, the update-free warm-up, the final evaluation (1 episode) and
-storing the policy are not timed. No checkpoint falls inside a measurement.
+steps and the gradient steps SAC_KWARGS asks for (``train_freq=1``;
+``gradient_steps=-1``: N, one per env step). The rate is env steps over the
+time from the first report at or after ``warmup_steps(N)`` (updates start
+after ``batch_size`` steps of the goal; a few dozen more let the first
+updates settle) to the last one. Loading the model, the update-free warm-up,
+the final evaluation (1 episode) and storing the policy are not timed; no
+checkpoint falls inside a measurement. learner_node reports progress about
+once a second, so its timed span is the same up to a second less.
 
-Rounds alternate between the two so that load on the shared machine hits
-both alike; the table reports medians and the ratio through ROS / in-process.
+Rounds alternate between the variants so that load on the shared machine
+hits all alike; the table reports medians and the ratios to in-process.
 """
 
 from __future__ import annotations
@@ -232,6 +234,10 @@ def run_learner_bench(env_counts: Sequence[int], steps: int, rounds: int, learne
 def learner_bench_report(rows: Sequence[LearnerBenchRow], command: str, steps: int, rounds: int) -> str:
     batch_size = SAC_KWARGS["batch_size"]
 
+    gradient_steps = SAC_KWARGS["gradient_steps"]
+    gradient_steps = ("N gradient steps" if gradient_steps == -1 else
+                      f"{gradient_steps} gradient step{'s' if gradient_steps != 1 else ''}")
+
     def maybe(value: float | None, digits: int) -> str:
         return "-" if value is None else f"{value:.{digits}f}"
 
@@ -240,8 +246,9 @@ def learner_bench_report(rows: Sequence[LearnerBenchRow], command: str, steps: i
         "",
         f"Command: `{command}`  ",
         f"{time.strftime('%Y-%m-%d %H:%M')}, Python {sys.version.split()[0]}, {os.cpu_count()} CPU cores. "
+        f"Load average at the end {os.getloadavg()[0]:.1f} (the machine is shared). "
         f"One Train goal per measurement: SAC from `{INITIAL_POLICY}` on {TASK} (batch {batch_size}, "
-        f"{SAC_KWARGS['gradient_steps']} gradient step per batch of N env steps, {TORCH_THREADS} torch thread); "
+        f"{gradient_steps} per batch of N env steps, {TORCH_THREADS} torch thread); "
         f"{steps} env steps timed after {batch_size} + {SETTLE_STEPS} + N warm-up steps (updates start after "
         f"{batch_size}); model loading, the warm-up, the final evaluation and storing are not timed. "
         f"*in-process* and *via sim_node* run the Trainer in the bench process (envs in it, or a sim_node "
@@ -255,4 +262,11 @@ def learner_bench_report(rows: Sequence[LearnerBenchRow], command: str, steps: i
     ]
     lines += [f"| {r.num_envs} | {r.in_process:.1f} | {r.through_ros:.1f} ({r.workers}) | {maybe(r.learner_node, 1)} "
               f"| {r.ratio:.2f} | {maybe(r.learner_node_ratio, 2)} |" for r in rows]
+    names = ("in-process", "via sim_node", "learner_node")
+    lines += ["", "Every round, in order (env steps/s):", ""]
+    for r in rows:
+        runs = "; ".join(f"{name} " + ", ".join(f"{v:.1f}" for v in run) for name, run in zip(names, r.rounds))
+        paired = [", ".join(f"{v / base:.2f}" for v, base in zip(run, r.rounds[0])) for run in r.rounds[1:]]
+        lines.append(f"- N={r.num_envs}: {runs} (ratios in the same round: "
+                     + "; ".join(f"{name} {ratios}" for name, ratios in zip(names[1:], paired)) + ")")
     return "\n".join(lines) + "\n"
