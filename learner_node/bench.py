@@ -17,10 +17,12 @@ viewer topics on) but for ``num_envs``, on a ROS domain of its own.
 What is timed: the Trainer reports progress after every vector step
 (``progress_interval_sec=0``); between two reports lie one batch of N env
 steps and the gradient steps SAC_KWARGS asks for (``train_freq=1``;
-``gradient_steps=-1``: N, one per env step). The rate is env steps over the
-time from the first report at or after ``warmup_steps(N)`` (updates start
-after ``batch_size`` steps of the goal; a few dozen more let the first
-updates settle) to the last one. Loading the model, the update-free warm-up,
+``gradient_steps=-1``: N, one per env step). Through sim_node a step's
+gradient steps run while the sim computes the next step
+(``learner_node.updates``); in-process, physics and updates take turns in
+one thread. The rate is env steps over the time from the first report at
+or after ``warmup_steps(N)`` (updates start after ``batch_size`` steps of
+the goal; a few dozen more let the first updates settle) to the last one. Loading the model, the update-free warm-up,
 the final evaluation (1 episode) and storing the policy are not timed; no
 checkpoint falls inside a measurement. learner_node reports progress about
 once a second, so its timed span is the same up to a second less.
@@ -38,6 +40,7 @@ import sys
 import tempfile
 import threading
 import time
+from contextlib import ExitStack
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Callable, Sequence
@@ -45,6 +48,7 @@ from typing import Callable, Sequence
 from glocal_ros.domain import reserve_domain_id
 from glocal_ros.paths import assets_dir
 from glocal_ros.processes import NodeProcess, isolated_environment
+from node_common.runner import spinning_node
 from learner_node.evaluation import BatchStepper
 from learner_node.policies import PolicyRegistry
 from learner_node.policy_store import PolicyStore
@@ -151,9 +155,6 @@ def _wait(future, timeout: float, what: str):
 
 def run_learner_bench(env_counts: Sequence[int], steps: int, rounds: int, learner_node: bool = True,
                       log: Callable[[str], None] = print) -> list[LearnerBenchRow]:
-    import rclpy
-    from rclpy.executors import SingleThreadedExecutor
-
     from learner_node.sim_client import SimClient
     from sim_node.batch import BatchedEnvs
     from sim_node.grasp_env import GraspEnv
@@ -162,17 +163,10 @@ def run_learner_bench(env_counts: Sequence[int], steps: int, rounds: int, learne
     work = Path(tempfile.mkdtemp(prefix="glocal-bench-learner-"))
     logs = work / "logs"
     policies = PolicyRegistry(PolicyStore(work / "policies"), [PolicyStore(assets_dir() / "priors")], seed=0)
-    context = rclpy.Context()
-    rclpy.init(context=context, domain_id=domain_id)
-    node = rclpy.create_node("bench_learner", context=context)
-    executor = SingleThreadedExecutor(context=context)
-    executor.add_node(node)
-    stop = threading.Event()
-    spinner = threading.Thread(target=lambda: [executor.spin_once(0.1) for _ in iter(stop.is_set, True)],
-                               daemon=True)
-    spinner.start()
     rows = []
+    stack = ExitStack()
     try:
+        node = stack.enter_context(spinning_node("bench_learner", domain_id))
         for num_envs in env_counts:
             workers = min(num_envs, os.cpu_count() or 1)
             namespace = f"/bench{num_envs}"
@@ -221,11 +215,7 @@ def run_learner_bench(env_counts: Sequence[int], steps: int, rounds: int, learne
                 for process in reversed(processes):
                     process.stop()
     finally:
-        stop.set()
-        spinner.join(5)
-        executor.shutdown()
-        node.destroy_node()
-        rclpy.try_shutdown(context=context)
+        stack.close()
         lock.close()
         shutil.rmtree(work, ignore_errors=True)
     return rows

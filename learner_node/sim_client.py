@@ -8,7 +8,7 @@ spinning its node's executor.
 
 from __future__ import annotations
 
-from typing import Sequence
+from typing import Callable, Sequence
 
 import numpy as np
 from glocal_interfaces.srv import ResetEnvs, StepEnvs
@@ -17,7 +17,7 @@ from rclpy.node import Node
 
 from node_common import names
 from node_common.arrays import from_float32_field, to_float32_field
-from node_common.calls import call_checked, wait_for_service
+from node_common.calls import call_checked, start_call, wait_for_service
 from sim_node.batch import StepBatch
 
 
@@ -59,19 +59,31 @@ class SimClient:
         self, actions: np.ndarray, next_tasks: Sequence[str] = (), phase: int = 0, policy_name: str = "",
         global_step: int = 0,
     ) -> StepBatch:
+        return self.start_step(actions, next_tasks, phase, policy_name, global_step)()
+
+    def start_step(
+        self, actions: np.ndarray, next_tasks: Sequence[str] = (), phase: int = 0, policy_name: str = "",
+        global_step: int = 0,
+    ) -> Callable[[], StepBatch]:
+        """Send the step now; the returned function waits for its batch (the learner trains meanwhile)."""
         request = StepEnvs.Request(
             actions=to_float32_field(actions), next_tasks=list(next_tasks), phase=phase,
             policy_name=policy_name, global_step=int(global_step),
         )
-        response = call_checked(self._step, request, self.timeout_sec)
-        obs_dim = response.obs_dim
-        return StepBatch(
-            observations=from_float32_field(response.observations).reshape(-1, obs_dim),
-            rewards=from_float32_field(response.rewards),
-            terminated=np.asarray(response.terminated, dtype=bool),
-            truncated=np.asarray(response.truncated, dtype=bool),
-            is_success=np.asarray(response.is_success, dtype=bool),
-            terminal_observations=from_float32_field(response.terminal_observations).reshape(-1, obs_dim),
-            tasks=list(response.tasks),
-            finished=[],
-        )
+        wait = start_call(self._step, request, self.timeout_sec, checked=True)
+
+        def finish() -> StepBatch:
+            response = wait()
+            obs_dim = response.obs_dim
+            return StepBatch(
+                observations=from_float32_field(response.observations).reshape(-1, obs_dim),
+                rewards=from_float32_field(response.rewards),
+                terminated=np.asarray(response.terminated, dtype=bool),
+                truncated=np.asarray(response.truncated, dtype=bool),
+                is_success=np.asarray(response.is_success, dtype=bool),
+                terminal_observations=from_float32_field(response.terminal_observations).reshape(-1, obs_dim),
+                tasks=list(response.tasks),
+                finished=[],
+            )
+
+        return finish

@@ -26,6 +26,8 @@ Choices:
   the baselines train one policy through many short goals.
 - Only training env steps count against the budget; evaluation steps do not
   (the paper counts training timesteps).
+- The gradient steps of a vector step run while the sim computes the next
+  one (``learner_node.updates``): SB3's updates, a step later.
 """
 
 from __future__ import annotations
@@ -47,6 +49,7 @@ from glocal_ros.files import atomic_write
 from learner_node.policy_store import PolicyRecord, check_name
 from learner_node.replay_buffer import load_replay_buffer, save_replay_buffer
 from learner_node.sac_settings import SAC_KWARGS, SCHEDULE_KEYS, TORCH_THREADS
+from learner_node.updates import OverlappedUpdates
 from learner_node.vec_env import BatchVecEnv, FinishedEpisode, TaskCycle
 
 #: B as a share of the evaluation episodes: the paper's 75 of 100.
@@ -161,6 +164,7 @@ class Trainer:
             used = between_steps()
             if evaluate_now["due"]:
                 evaluate_now["due"] = False
+                updates.pay()
                 self._evaluate_task(model, spec, state)
                 used = True
             return used
@@ -171,6 +175,8 @@ class Trainer:
         model, resumed = self._model(spec, vec_env, checkpoint_dir, state)
         for key in SCHEDULE_KEYS:
             setattr(model, key, SAC_KWARGS[key])
+        updates = OverlappedUpdates(model)
+        vec_env.while_stepping = updates.pay
         if spec.stop_when_learned and spec.task and state.score is None:
             # "Train until S > B" checks first: a policy that passes already is not trained.
             self._evaluate_task(model, spec, state)
@@ -201,14 +207,19 @@ class Trainer:
                                               (steps - resumed) / max(now - started, 1e-9)))
                 if steps - last["checkpoint"] >= trainer.checkpoint_interval:
                     last["checkpoint"] = steps
-                    trainer._save_checkpoint(checkpoint_dir, spec, self.model, state)
+                    with updates.settled():
+                        trainer._save_checkpoint(checkpoint_dir, spec, self.model, state)
                 stop_reason = should_stop()
-                return not stop_reason and not (spec.stop_when_learned and state.learned)
+                keep_going = not stop_reason and not (spec.stop_when_learned and state.learned)
+                if keep_going:  # SB3 skips the updates of the step that stops it
+                    updates.owe(vec_env.num_envs)
+                return keep_going
 
         remaining = spec.step_budget - state.steps_used
         if remaining > 0 and not (spec.stop_when_learned and state.learned):
             try:
-                model.learn(remaining, callback=GoalCallback(), reset_num_timesteps=False, progress_bar=False)
+                with updates:
+                    model.learn(remaining, callback=GoalCallback(), reset_num_timesteps=False, progress_bar=False)
             except BaseException:
                 # The sim went away, or the process is stopping: keep what was trained.
                 if state.steps_used > last["checkpoint"]:

@@ -10,6 +10,11 @@ Between two steps, ``between_steps`` may use the same envs for something else
 gone, so the VecEnv starts new ones and reports the cut episodes as
 truncated, with the true last observation as ``terminal_observation``: SAC
 bootstraps from it as it does at a time limit, and no transition is made up.
+
+``while_stepping`` runs during every step: after the batch was sent, when
+the envs have ``start_step`` (the sim node's client), so the learner's own
+work overlaps the sim's; just before the step otherwise (in-process envs
+step in this thread). The learner puts its gradient steps there.
 """
 
 from __future__ import annotations
@@ -66,12 +71,14 @@ class BatchVecEnv(VecEnv):
         policy_name: str = "",
         global_step: Callable[[], int] = lambda: 0,
         between_steps: Callable[[], bool] = lambda: False,
+        while_stepping: Callable[[], None] = lambda: None,
     ):
         self.envs = envs
         self.tasks = iter(tasks)
         self.policy_name = policy_name
         self.global_step = global_step
         self.between_steps = between_steps
+        self.while_stepping = while_stepping
         # The batch size is known once the envs answer a reset.
         first_task = next(self.tasks)
         observations, _ = envs.reset((), [first_task], (), PHASE_TRAIN, policy_name)
@@ -98,7 +105,15 @@ class BatchVecEnv(VecEnv):
         self._actions = actions
 
     def step_wait(self):
-        batch = self.envs.step(self._actions, self._reserved, PHASE_TRAIN, self.policy_name, self.global_step())
+        request = (self._actions, self._reserved, PHASE_TRAIN, self.policy_name, self.global_step())
+        start_step = getattr(self.envs, "start_step", None)
+        if start_step is None:
+            self.while_stepping()
+            batch = self.envs.step(*request)
+        else:
+            finish_step = start_step(*request)
+            self.while_stepping()
+            batch = finish_step()
         self._returns += batch.rewards
         self._lengths += 1
         dones = batch.terminated | batch.truncated

@@ -11,7 +11,7 @@ other than the waiting callback's).
 from __future__ import annotations
 
 import threading
-from typing import Any
+from typing import Any, Callable
 
 from rclpy.client import Client
 
@@ -25,22 +25,36 @@ def wait_for_service(client: Client, timeout_sec: float) -> None:
         raise ServiceCallError(f"service {client.srv_name} is not available after {timeout_sec:.0f} s")
 
 
-def call(client: Client, request: Any, timeout_sec: float = 60.0) -> Any:
-    """Send ``request`` and wait for the response; needs an executor spinning elsewhere."""
+def start_call(client: Client, request: Any, timeout_sec: float = 60.0, checked: bool = False) -> Callable[[], Any]:
+    """Send ``request`` now; the returned function waits for the response.
+
+    The caller can work while the service does (the learner trains while the
+    sim steps). ``checked``: the wait raises when the response says
+    ``success=False``. Needs an executor spinning elsewhere.
+    """
     future = client.call_async(request)
     done = threading.Event()
     future.add_done_callback(lambda _: done.set())
-    if not done.wait(timeout_sec):
-        client.remove_pending_request(future)
-        raise ServiceCallError(f"service {client.srv_name} did not answer within {timeout_sec:.0f} s")
-    if future.exception() is not None:
-        raise ServiceCallError(f"service {client.srv_name} failed: {future.exception()}")
-    return future.result()
+
+    def wait() -> Any:
+        if not done.wait(timeout_sec):
+            client.remove_pending_request(future)
+            raise ServiceCallError(f"service {client.srv_name} did not answer within {timeout_sec:.0f} s")
+        if future.exception() is not None:
+            raise ServiceCallError(f"service {client.srv_name} failed: {future.exception()}")
+        response = future.result()
+        if checked and not response.success:
+            raise ServiceCallError(f"{client.srv_name}: {response.message}")
+        return response
+
+    return wait
+
+
+def call(client: Client, request: Any, timeout_sec: float = 60.0) -> Any:
+    """Send ``request`` and wait for the response; needs an executor spinning elsewhere."""
+    return start_call(client, request, timeout_sec)()
 
 
 def call_checked(client: Client, request: Any, timeout_sec: float = 60.0) -> Any:
     """``call``, raising ``ServiceCallError`` when the response says ``success=False``."""
-    response = call(client, request, timeout_sec)
-    if not response.success:
-        raise ServiceCallError(f"{client.srv_name}: {response.message}")
-    return response
+    return start_call(client, request, timeout_sec, checked=True)()

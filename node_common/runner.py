@@ -3,7 +3,9 @@
 from __future__ import annotations
 
 import os
-from typing import Callable, Sequence
+import threading
+from contextlib import contextmanager
+from typing import Callable, Iterator, Sequence
 
 import rclpy
 from rclpy.executors import ExternalShutdownException, MultiThreadedExecutor, SingleThreadedExecutor
@@ -59,3 +61,26 @@ def spin_node(make_node: Callable[[], Node], args: Sequence[str] | None = None, 
             node.destroy_node()
         rclpy.try_shutdown()
     return 1 if failed else getattr(node, "exit_code", 0)
+
+
+@contextmanager
+def spinning_node(name: str, domain_id: int) -> Iterator[Node]:
+    """A node on a context of its own, spun in a background thread: for tools that call nodes (the benches)."""
+    configure_discovery()
+    context = rclpy.Context()
+    rclpy.init(context=context, domain_id=domain_id)
+    node = rclpy.create_node(name, context=context)
+    executor = SingleThreadedExecutor(context=context)
+    executor.add_node(node)
+    stop = threading.Event()
+    spinner = threading.Thread(target=lambda: [executor.spin_once(0.1) for _ in iter(stop.is_set, True)],
+                               daemon=True)
+    spinner.start()
+    try:
+        yield node
+    finally:
+        stop.set()
+        spinner.join(5)
+        executor.shutdown()
+        node.destroy_node()
+        rclpy.try_shutdown(context=context)

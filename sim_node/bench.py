@@ -15,8 +15,8 @@ import os
 import statistics
 import sys
 import tempfile
-import threading
 import time
+from contextlib import ExitStack
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Callable, Sequence
@@ -25,6 +25,7 @@ import numpy as np
 
 from glocal_ros.domain import reserve_domain_id
 from glocal_ros.processes import NodeProcess, isolated_environment
+from node_common.runner import spinning_node
 from sim_node.batch import BatchedEnvs
 from sim_node.grasp_env import GraspEnv
 
@@ -53,23 +54,14 @@ def steps_per_second(step_batch: Callable[[np.ndarray], object], num_envs: int, 
 
 def run_sim_bench(env_counts: Sequence[int], batches: int, rounds: int, task: str = "A0",
                   log: Callable[[str], None] = print) -> list[SimBenchRow]:
-    import rclpy
-    from rclpy.executors import SingleThreadedExecutor
-
     from learner_node.sim_client import SimClient
 
     domain_id, lock = reserve_domain_id()
     logs = Path(tempfile.mkdtemp(prefix="glocal-bench-"))
-    rclpy.init(domain_id=domain_id)
-    node = rclpy.create_node("bench_sim")
-    executor = SingleThreadedExecutor()
-    executor.add_node(node)
-    stop = threading.Event()
-    spinner = threading.Thread(target=lambda: [executor.spin_once(0.1) for _ in iter(stop.is_set, True)],
-                               daemon=True)
-    spinner.start()
     rows = []
+    stack = ExitStack()
     try:
+        node = stack.enter_context(spinning_node("bench_sim", domain_id))
         for num_envs in env_counts:
             env = isolated_environment(domain_id, logs)
             workers = min(num_envs, os.cpu_count() or 1)
@@ -101,10 +93,7 @@ def run_sim_bench(env_counts: Sequence[int], batches: int, rounds: int, task: st
                 for sim in sims:
                     sim.stop()
     finally:
-        stop.set()
-        spinner.join(5)
-        node.destroy_node()
-        rclpy.try_shutdown()
+        stack.close()
         lock.close()
     return rows
 

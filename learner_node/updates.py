@@ -1,0 +1,63 @@
+"""SAC's gradient steps run during the next env step, where a remote sim leaves the learner idle.
+
+stable-baselines3's off-policy loop alternates: collect a vector step (N env
+steps), then do its gradient steps. With the envs in sim_node a step is a
+round trip during which the learner only waits, while the gradient steps
+are the learner's own work. ``OverlappedUpdates`` takes the loop's gradient
+steps out of it and pays them during the next step (``BatchVecEnv``'s
+``while_stepping``): the sim computes step t+1 while the learner does step
+t's updates.
+
+What changes for SAC: the action of step t+1 comes from a policy without the
+updates of step t (a lag of one vector step); the number of gradient steps,
+their batches and when learning starts are SB3's. The owed steps are paid
+before anything looks at the model (evaluation, checkpoint, store), so the
+saved models and the goal's outcome are those of the plain loop's order.
+"""
+
+from __future__ import annotations
+
+from contextlib import contextmanager
+from typing import Iterator
+
+
+class OverlappedUpdates:
+    """Within ``with``, ``model.learn`` collects only; ``pay`` runs the gradient steps it owes."""
+
+    def __init__(self, model):
+        self.model = model
+        self.owed = 0
+        self._gradient_steps = model.gradient_steps
+
+    def __enter__(self) -> "OverlappedUpdates":
+        self._gradient_steps = self.model.gradient_steps
+        self.model.gradient_steps = 0  # SB3's loop skips its own updates at 0
+        return self
+
+    def __exit__(self, *exc_info) -> None:
+        try:
+            self.pay()
+        finally:
+            self.model.gradient_steps = self._gradient_steps
+
+    def owe(self, env_steps: int) -> None:
+        """After a vector step of ``env_steps`` that SB3 would follow with updates: what it would do."""
+        if self.model.num_timesteps > self.model.learning_starts:
+            self.owed += self._gradient_steps if self._gradient_steps >= 0 else env_steps
+
+    def pay(self) -> None:
+        """Run the owed gradient steps now."""
+        if self.owed > 0:
+            owed, self.owed = self.owed, 0
+            self.model.train(gradient_steps=owed, batch_size=self.model.batch_size)
+
+    @contextmanager
+    def settled(self) -> Iterator[None]:
+        """Pay, and show the model's own settings while it is saved."""
+        self.pay()
+        overlapping = self.model.gradient_steps
+        self.model.gradient_steps = self._gradient_steps
+        try:
+            yield
+        finally:
+            self.model.gradient_steps = overlapping
