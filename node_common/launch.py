@@ -10,6 +10,9 @@ the run: RUN_DIR keeps the curriculum's journal (``curriculum/``), the
 learner's policies and checkpoints (``policies/``), one bag per launch
 (``bag/``, ``bag.1/``, ...), ``logs/`` and ``report/``.
 
+The seed goes to sim, learner and curriculum alike, so that a run with the
+same seed repeats this one.
+
 ``experiment`` runs strategies x seeds as separate launches into
 ``OUT/<strategy>-seed<N>/``, skips runs already finished, resumes the others,
 then writes one report over all of them.
@@ -147,7 +150,7 @@ def launch(strategy: str, preset: str, seed: int, run_dir: Path, startup_timeout
     exit_code = 1
     try:
         start("recorder_node", output=str(bag))
-        start("sim_node")
+        start("sim_node", seed=seed)
         start("learner_node", seed=seed, policy_dir=str(run_dir / "policies"))
         deadline = time.monotonic() + startup_timeout
         while node.count_subscribers("/" + names.EPISODES) < 1 or node.count_publishers("/" + names.EPISODES) < 1:

@@ -131,10 +131,14 @@ class BatchedEnvs:
 
     ``first_index`` numbers the envs from there in episode logs, for a batch
     that is one worker's share of a larger one (``sim_node.parallel``).
+    ``seed``: env k's first episode gets ``seed + k``, and its later unseeded
+    episodes continue that env's random stream, so the same calls give the
+    same episodes; None leaves the envs to the OS's entropy.
     """
 
     def __init__(
-        self, make_env: Callable[[int], BatchEnv], num_envs: int, initial_task: str = "A0", first_index: int = 0
+        self, make_env: Callable[[int], BatchEnv], num_envs: int, initial_task: str = "A0", first_index: int = 0,
+        seed: int | None = None,
     ):
         if num_envs < 1:
             raise ValueError(f"num_envs must be at least 1, got {num_envs}")
@@ -148,7 +152,7 @@ class BatchedEnvs:
         # step works at once; a reset before any step records nothing of it.
         self._logs: dict[int, EpisodeLog] = {}
         for i in range(num_envs):
-            self._begin_episode(i, UNSEEDED, PHASE_TRAIN, "")
+            self._begin_episode(i, UNSEEDED if seed is None else seed + first_index + i, PHASE_TRAIN, "")
 
     @property
     def num_envs(self) -> int:

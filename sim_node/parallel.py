@@ -23,12 +23,12 @@ from sim_node.grasp_env import GraspEnv, GraspEnvConfig
 
 
 def _worker(connection, first_index: int, num_envs: int, initial_task: str, objects_dir: str,
-            config: GraspEnvConfig, gui_index: int) -> None:
+            config: GraspEnvConfig, gui_index: int, seed: int | None) -> None:
     # Ctrl-C reaches the whole process group; the parent decides when workers stop.
     signal.signal(signal.SIGINT, signal.SIG_IGN)
     batch = BatchedEnvs(
         lambda i: GraspEnv(initial_task, objects_dir, config, render_mode="human" if i == gui_index else None),
-        num_envs, initial_task, first_index,
+        num_envs, initial_task, first_index, seed,
     )
     connection.send((True, (batch.obs_dim, batch.action_dim, batch.joint_names)))
     try:
@@ -54,7 +54,7 @@ def split(num_envs: int, workers: int) -> list[range]:
 
 class ProcessBatchedEnvs:
     def __init__(self, num_envs: int, workers: int, initial_task: str, objects_dir: str,
-                 config: GraspEnvConfig, gui: bool = False):
+                 config: GraspEnvConfig, gui: bool = False, seed: int | None = None):
         task_index(initial_task)  # a clear error here, not a worker dying at start-up
         context = mp.get_context("spawn")
         self.shares = split(num_envs, workers)
@@ -64,7 +64,7 @@ class ProcessBatchedEnvs:
             parent, child = context.Pipe()
             process = context.Process(
                 target=_worker, name=f"sim-worker-{share.start}", daemon=True,
-                args=(child, share.start, len(share), initial_task, objects_dir, config, 0 if gui else -1),
+                args=(child, share.start, len(share), initial_task, objects_dir, config, 0 if gui else -1, seed),
             )
             process.start()
             self._connections.append(parent)

@@ -54,14 +54,18 @@ class SimNode(Node):
         workers = declare(self, "workers", 0, "processes stepping the envs in parallel; 0: one per CPU core, "
                           "at most num_envs; 1: all envs in this process", min_value=0, max_value=256)
         workers = min(num_envs, workers or os.cpu_count() or 1)
+        seed = declare(self, "seed", -1, "-1: episodes from the OS's entropy; else env k's first episode gets "
+                       "seed + k and the rest follow from it, so a run is repeatable", min_value=-1,
+                       max_value=2**31 - 1)
+        seed = None if seed < 0 else seed
         config = GraspEnvConfig(max_steps=max_steps)
         objects = objects or str(objects_dir())
         if workers > 1:
-            self.batch = ProcessBatchedEnvs(num_envs, workers, initial_task, objects, config, gui)
+            self.batch = ProcessBatchedEnvs(num_envs, workers, initial_task, objects, config, gui, seed)
         else:
             self.batch = BatchedEnvs(
                 lambda i: GraspEnv(initial_task, objects, config, render_mode="human" if gui and i == 0 else None),
-                num_envs, initial_task,
+                num_envs, initial_task, seed=seed,
             )
         self.episode_seq = 0
 

@@ -48,6 +48,17 @@ def test_smoke_launch_records_the_run_and_reports_it(tmp_path):
     assert refused.returncode == 2 and "holds the run" in refused.stderr
 
 
+def test_the_same_seed_repeats_the_run_answer_for_answer(tmp_path):
+    """Seeded sim episodes, learner and curriculum: two runs' journals (every score, every episode) agree."""
+    journals = []
+    for name in ("first", "second"):
+        result = launch(tmp_path / name, "--seed", "5")
+        assert result.returncode == 0, result.stdout + result.stderr
+        journals.append((tmp_path / name / "curriculum" / "journal.jsonl").read_text())
+    assert journals[0].count('"call": "train"') > 0
+    assert journals[0] == journals[1]
+
+
 def test_ctrl_c_leaves_a_valid_bag_and_the_same_command_resumes(tmp_path):
     run_dir = tmp_path / "run"
     command = [*CLI, "launch", "--preset", "smoke", "--strategy", "random", "--out", str(run_dir)]

@@ -57,3 +57,24 @@ def test_partial_reset_and_bad_requests(batches):
     with pytest.raises(ValueError, match="NaN"):
         parallel.step(np.full((3, 5), np.nan, dtype=np.float32))
     assert parallel.step(np.zeros((3, 5), dtype=np.float32)).observations.shape == (3, 63)
+
+
+def test_a_seeded_batch_repeats_its_episodes_without_seeded_resets():
+    """sim_node's ``seed``: only the first episodes are seeded, the rest follow, in workers or not."""
+
+    def episodes(batch) -> list[np.ndarray]:
+        try:
+            seen = [batch.reset(tasks=["A0", "B1", "C2"])[0]]
+            for _ in range(T):  # through one automatic reset
+                seen.append(batch.step(np.zeros((3, 5), dtype=np.float32), next_tasks=["D3", "", ""]).observations)
+            seen.append(batch.reset()[0])
+            return seen
+        finally:
+            batch.close()
+
+    parallel = episodes(ProcessBatchedEnvs(3, 2, "A0", str(objects_dir()), CONFIG, seed=7))
+    serial = episodes(BatchedEnvs(lambda i: GraspEnv("A0", config=CONFIG), 3, seed=7))
+    other_seed = episodes(BatchedEnvs(lambda i: GraspEnv("A0", config=CONFIG), 3, seed=8))
+    for a, b in zip(parallel, serial):
+        np.testing.assert_array_equal(a, b)
+    assert not np.array_equal(serial[-1], other_seed[-1])
