@@ -194,6 +194,9 @@ class LearnerNode(Node):
                 )
                 self.run_jobs()  # whatever arrived after the last step
         except Exception as error:  # noqa: BLE001 - the client gets the reason; the node keeps serving
+            if not self.context.ok():  # no client can hear of it; the trainer saved its last whole step
+                self.get_logger().info(f"{goal.output_policy}: stopped by the shutdown ({error})")
+                return result
             result.message = f"training failed: {type(error).__name__}: {error}"
             self.get_logger().error(result.message)
             goal_handle.abort()
@@ -206,10 +209,13 @@ class LearnerNode(Node):
             result.score = TaskScore(task=outcome.score.task, successes=outcome.score.successes,
                                      episodes=outcome.score.episodes)
             self.policies.record_score(spec.output_policy, outcome.score.task, outcome.score.successes)
+        self.get_logger().info(f"{spec.output_policy}: {outcome.message}")
+        if not self.context.ok():
+            return result  # shutting down: nothing can be published any more
+        if outcome.score is not None:
             self._publish_evaluation(spec.output_policy, [result.score], "train")
         result.episodes = [EpisodeOutcome(task=e.task, episode_return=e.episode_return, length=e.length,
                                           success=e.success) for e in outcome.episodes]
-        self.get_logger().info(f"{spec.output_policy}: {outcome.message}")
         if goal_handle.is_cancel_requested:
             goal_handle.canceled()
         elif outcome.completed:

@@ -11,9 +11,13 @@ other than the waiting callback's).
 from __future__ import annotations
 
 import threading
+import time
 from typing import Any, Callable
 
 from rclpy.client import Client
+
+
+CONTEXT_POLL_SEC = 0.1
 
 
 class ServiceCallError(RuntimeError):
@@ -33,13 +37,18 @@ def start_call(client: Client, request: Any, timeout_sec: float = 60.0, checked:
     ``success=False``. Needs an executor spinning elsewhere.
     """
     future = client.call_async(request)
+    deadline = time.monotonic() + timeout_sec
     done = threading.Event()
     future.add_done_callback(lambda _: done.set())
 
     def wait() -> Any:
-        if not done.wait(timeout_sec):
-            client.remove_pending_request(future)
-            raise ServiceCallError(f"service {client.srv_name} did not answer within {timeout_sec:.0f} s")
+        # A response can only come while the context spins: after a shutdown, stop waiting for it.
+        while not done.wait(CONTEXT_POLL_SEC):
+            if not client.context.ok():
+                raise ServiceCallError(f"shut down while waiting for {client.srv_name}")
+            if time.monotonic() > deadline:
+                client.remove_pending_request(future)
+                raise ServiceCallError(f"service {client.srv_name} did not answer within {timeout_sec:.0f} s")
         if future.exception() is not None:
             raise ServiceCallError(f"service {client.srv_name} failed: {future.exception()}")
         response = future.result()

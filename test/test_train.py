@@ -5,7 +5,9 @@ action's behaviour, not learning (that is `glocal-ros bench learner`).
 """
 
 import json
+import signal
 import threading
+import time
 
 import pytest
 from action_msgs.msg import GoalStatus
@@ -58,8 +60,9 @@ def graph(start_node, ros_node, tmp_path):
     policy_dir = tmp_path / "policies"
     sim = start_node("sim_node", num_envs=2, max_steps=10)
 
-    def start_learner():
-        learner = start_node("learner_node", max_eval_episodes=50, policy_dir=str(policy_dir), checkpoint_interval=40)
+    def start_learner(checkpoint_interval: int = 40):
+        learner = start_node("learner_node", max_eval_episodes=50, policy_dir=str(policy_dir),
+                             checkpoint_interval=checkpoint_interval)
         wait_until(train.server_is_ready, 60, "learner/train", processes=[sim, learner])
         # After a restart the killed learner's endpoints linger in discovery:
         # an answered request proves that this one is matched.
@@ -151,6 +154,24 @@ def test_a_killed_learner_resumes_the_goal_from_its_checkpoint(graph, ros_node):
     assert f"resumed from a checkpoint at step {saved_steps}" in result.message
     assert 400 <= result.steps_used < 402
     assert stored_policies(ros_node)["trained"].parent == "prior"
+
+
+def test_ctrl_c_mid_goal_checkpoints_the_last_step_at_once(graph):
+    """Ctrl-C reaches sim and learner together: the step that is out (nearly always, as updates overlap
+    it) is never answered, and the learner checkpoints its last whole step instead of waiting for it."""
+    graph["learner"].stop()
+    learner = graph["start_learner"](checkpoint_interval=10**6)  # no periodic checkpoint
+    goal = Goal(graph["train"], train_goal(step_budget=5_000))
+    wait_until(lambda: goal.feedback and goal.feedback[-1].steps >= 320, 120, "updates under way",
+               processes=[learner])
+    steps_seen = goal.feedback[-1].steps
+    started = time.monotonic()
+    graph["sim"].process.send_signal(signal.SIGINT)
+    assert learner.stop(signal.SIGINT) == 0, learner.log()
+    assert time.monotonic() - started < 8
+    checkpoint = json.loads((graph["policy_dir"] / ".checkpoints" / "trained" / "checkpoint.json").read_text())
+    assert checkpoint["state"]["steps_used"] >= steps_seen
+    assert "Traceback" not in learner.log()
 
 
 @pytest.mark.parametrize("fields, message", [
