@@ -27,10 +27,9 @@ class OverlappedUpdates:
     def __init__(self, model):
         self.model = model
         self.owed = 0
-        self._gradient_steps = model.gradient_steps
+        self._gradient_steps = model.gradient_steps  # the model's own setting, restored on exit
 
     def __enter__(self) -> "OverlappedUpdates":
-        self._gradient_steps = self.model.gradient_steps
         self.model.gradient_steps = 0  # SB3's loop skips its own updates at 0
         return self
 
