@@ -2,6 +2,23 @@
 
 Calls block until answered (a Train goal until it ends), so they run in the
 curriculum's worker thread while the node's executor spins elsewhere.
+
+No answer is waited for forever. A Train goal is idempotent on the learner
+(the same goal sent again resumes from its checkpoint, or gets back the
+outcome of the run that finished), so every loss is answered by sending the
+same goal again:
+- the goal response (accepted/rejected) comes within
+  ``GOAL_RESPONSE_TIMEOUT_SEC``, or the goal is sent again; a learner that is
+  still running the first copy rejects the second as busy, and the copy
+  offered after it finished gets its outcome;
+- the result response: the result is asked for again every
+  ``RESULT_PROBE_SEC``; the learner answers each request when the goal ends;
+- the learner itself: a restarted learner answers those requests at once
+  with STATUS_UNKNOWN (it never had the goal), and the goal is sent again,
+  resuming from its last checkpoint; a learner that does not come back
+  within ``timeout_sec`` fails the call.
+The race that drops responses inside rclpy is closed by
+``node_common.action_client``.
 """
 
 from __future__ import annotations
@@ -13,21 +30,30 @@ from typing import Callable, Sequence
 from action_msgs.msg import GoalStatus
 from glocal_interfaces.action import Train
 from glocal_interfaces.srv import CopyPolicy, Evaluate
-from rclpy.action import ActionClient
 from rclpy.callback_groups import ReentrantCallbackGroup
 from rclpy.node import Node
 
 from glocal_ros.curriculum.learner import EpisodeSummary, TrainRequest, TrainResult
 from node_common import names
+from node_common.action_client import ActionClient
 from node_common.calls import ServiceCallError, call_checked, wait_for_service
 
 #: How long to wait before offering a goal again that the learner rejected
 #: because it is busy (with a goal this node sent before it was restarted).
 BUSY_RETRY_SEC = 2.0
+#: The learner accepts or rejects a goal at once; no answer by then was lost.
+GOAL_RESPONSE_TIMEOUT_SEC = 30.0
+#: Seconds between extra result requests of a running goal (see ``RosLearner._wait_result``).
+RESULT_PROBE_SEC = 10.0
+POLL_SEC = 0.5
 
 
 class LearnerStopped(RuntimeError):
     """The node is shutting down, or the goal was canceled: the run stops here and can resume."""
+
+
+class _NoAnswer(Exception):
+    """A response did not come in time."""
 
 
 class RosLearner:
@@ -40,6 +66,9 @@ class RosLearner:
         self._evaluate = node.create_client(Evaluate, names.LEARNER_EVALUATE, callback_group=group)
         self._copy = node.create_client(CopyPolicy, names.LEARNER_COPY_POLICY, callback_group=group)
         self._train = ActionClient(node, Train, names.LEARNER_TRAIN, callback_group=group)
+        # What the recovery below had to do (``glocal-ros bench graph`` reports them).
+        self.goals_sent_again = 0  # a goal response lost, or the learner left mid-goal
+        self.results_asked_again = 0  # the goal ended, its result response did not come
 
     def wait_for_learner(self) -> None:
         wait_for_service(self._evaluate, self.timeout_sec)
@@ -68,8 +97,14 @@ class RosLearner:
             eval_episodes=request.eval_episodes, eval_interval=request.eval_interval,
             stop_when_learned=request.stop_when_learned, keep_replay_buffer=request.keep_replay_buffer,
         )
-        handle = self._send(goal)
-        response = self._wait(handle.get_result_async())
+        while True:
+            response = self._wait_result(self._send(goal))
+            if response is not None:
+                break
+            self.goals_sent_again += 1
+            self.node.get_logger().warning(
+                f"the learner was restarted while training {goal.output_policy}: sending the goal again "
+                f"(it resumes from its checkpoint)")
         status, result = response.status, response.result
         if status == GoalStatus.STATUS_SUCCEEDED:
             episodes = tuple(EpisodeSummary(e.task, e.episode_return, e.length, e.success) for e in result.episodes)
@@ -80,22 +115,84 @@ class RosLearner:
         raise ServiceCallError(f"training {request.output_policy} failed: {result.message}")
 
     def _send(self, goal: Train.Goal):
+        """The handle of ``goal`` once the learner accepted it."""
+        deadline = time.monotonic() + self.timeout_sec
         while True:
-            handle = self._wait(self._train.send_goal_async(
-                goal, feedback_callback=lambda message: self.on_feedback(message.feedback)), self.timeout_sec)
+            future = self._train.send_goal_async(
+                goal, feedback_callback=lambda message: self.on_feedback(message.feedback))
+            try:
+                handle = self._wait(future, GOAL_RESPONSE_TIMEOUT_SEC)
+            except _NoAnswer:
+                self._train._remove_pending_goal_request(future)
+                self.goals_sent_again += 1
+                if time.monotonic() > deadline:
+                    raise ServiceCallError(
+                        f"{names.LEARNER_TRAIN} answered no goal within {self.timeout_sec:.0f} s") from None
+                self.node.get_logger().warning(
+                    f"no answer to the goal {goal.output_policy} in {GOAL_RESPONSE_TIMEOUT_SEC:.0f} s: sending it again")
+                continue
             if handle.accepted:
                 return handle
             self.node.get_logger().info(f"the learner is busy; offering {goal.output_policy} again shortly")
             time.sleep(BUSY_RETRY_SEC)
 
-    def _wait(self, future, timeout_sec: float | None = None):
-        """The future's result; a goal may take hours, so by default only shutdown ends the wait."""
+    def _wait_result(self, handle):
+        """The goal's result response; None when the learner no longer knows the goal (it was restarted).
+
+        Besides the first result request, another goes every ``RESULT_PROBE_SEC`` while the
+        server is up: the learner that runs the goal answers them all when it ends (so a lost
+        response is made good), and a restarted learner, which never had the goal, answers at
+        once with STATUS_UNKNOWN. The server seen in the graph says nothing here: a learner
+        restarted within the discovery lease takes the old one's place unnoticed.
+        """
+        asked = []
+        answered = threading.Event()
+
+        def ask() -> None:
+            future = handle.get_result_async()
+            future.add_done_callback(lambda _: answered.set())
+            asked.append(future)
+
+        ask()
+        next_probe, missing_since = time.monotonic() + RESULT_PROBE_SEC, None
+        try:
+            while True:
+                if answered.wait(POLL_SEC):
+                    answered.clear()
+                    responses = [future.result() for future in asked if future.done()]
+                    known = [r for r in responses if r.status != GoalStatus.STATUS_UNKNOWN]
+                    if known:
+                        if not asked[0].done():
+                            self.results_asked_again += 1  # the first response was lost
+                        return known[0]
+                    if responses:
+                        return None
+                if not self.node.context.ok():
+                    raise LearnerStopped("the node is shutting down")
+                now = time.monotonic()
+                if self._train.server_is_ready():
+                    missing_since = None
+                    if now >= next_probe:
+                        ask()
+                        next_probe = now + RESULT_PROBE_SEC
+                else:
+                    missing_since = missing_since or now
+                    if now - missing_since > self.timeout_sec:
+                        raise ServiceCallError(f"{names.LEARNER_TRAIN} left the graph and was not back within "
+                                               f"{self.timeout_sec:.0f} s")
+        finally:
+            for future in asked:
+                if not future.done():
+                    self._train._remove_pending_result_request(future)
+
+    def _wait(self, future, timeout_sec: float):
+        """The future's result within ``timeout_sec`` (``_NoAnswer`` otherwise); shutdown ends the wait."""
         done = threading.Event()
         future.add_done_callback(lambda _: done.set())
-        deadline = None if timeout_sec is None else time.monotonic() + timeout_sec
-        while not done.wait(0.5):
+        deadline = time.monotonic() + timeout_sec
+        while not done.wait(POLL_SEC):
             if not self.node.context.ok():
                 raise LearnerStopped("the node is shutting down")
-            if deadline is not None and time.monotonic() > deadline:
-                raise ServiceCallError(f"{names.LEARNER_TRAIN} did not answer within {timeout_sec:.0f} s")
+            if time.monotonic() > deadline:
+                raise _NoAnswer()
         return future.result()

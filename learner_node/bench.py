@@ -112,9 +112,9 @@ class LearnerNodeGoals:
     def __init__(self, node, namespace: str):
         from glocal_interfaces.action import Train
         from glocal_interfaces.msg import TrainingProgress
-        from rclpy.action import ActionClient
 
         from node_common import names, qos
+        from node_common.action_client import ActionClient
 
         self._train_type = Train
         self.client = ActionClient(node, Train, f"{namespace}/{names.LEARNER_TRAIN}")
