@@ -10,7 +10,12 @@ through the sim node's batched ``sim/reset`` and ``sim/step``.
 
 One sim serves one job at a time. An Evaluate request that arrives while a
 Train goal runs is served between two training steps (the goal pauses, then
-goes on); a second Train goal is rejected while one runs.
+goes on); a second Train goal is rejected while one runs (taken under a lock
+in the goal callback, as ros2/examples' ``server_single_goal.py`` guards its
+goal, so two goals sent at the same moment cannot both be accepted). A goal
+the learner cannot run is accepted and aborted at once with the reason: the
+action protocol gives a rejection no message, and the client must tell
+"busy, offer it again" from "never send this".
 
 Policies: ``random``, the learner's policy store (``policy_dir``) and the
 shipped A0 ``prior``; ``learner/copy_policy`` copies one into the store.
@@ -40,7 +45,8 @@ from learner_node.evaluation import evaluate
 from learner_node.policies import PolicyRegistry
 from learner_node.policy_store import PolicyStore
 from learner_node.sim_client import SimClient
-from learner_node.training import DEFAULT_EVAL_EPISODES, DEFAULT_THRESHOLD_FRACTION, Trainer, TrainProgress, TrainSpec
+from learner_node.training import (DEFAULT_EVAL_EPISODES, DEFAULT_MAX_STEP_BUDGET, DEFAULT_THRESHOLD_FRACTION,
+                                   GoalFailed, Trainer, TrainProgress, TrainSpec)
 from node_common import names, qos
 from node_common.params import declare
 from node_common.runner import spin_node
@@ -76,6 +82,8 @@ class LearnerNode(Node):
                                    min_value=0.1, max_value=3600.0)
         seed = declare(self, "seed", 0, "seed of the learner's random streams", min_value=0, max_value=2**31 - 1)
         policy_dir = declare(self, "policy_dir", str(default_policy_dir()), "the learner's policy store")
+        self.max_step_budget = declare(self, "max_step_budget", DEFAULT_MAX_STEP_BUDGET,
+                                       "largest step_budget of a Train goal", min_value=1, max_value=2**62)
         checkpoint_interval = declare(self, "checkpoint_interval", 5_000,
                                       "training env steps between checkpoints of a Train goal",
                                       min_value=1, max_value=10_000_000)
@@ -88,7 +96,8 @@ class LearnerNode(Node):
         self.sim_lock = threading.Lock()
         self._jobs: deque[SimJob] = deque()
         self._jobs_lock = threading.Lock()
-        self._goal_active = threading.Event()
+        self._goal_lock = threading.Lock()
+        self._goal_taken = False  # under _goal_lock: from a goal's acceptance to the end of its execution
 
         requests = MutuallyExclusiveCallbackGroup()
         self.create_service(Evaluate, names.LEARNER_EVALUATE, self.on_evaluate, callback_group=requests)
@@ -155,12 +164,21 @@ class LearnerNode(Node):
             ran = True
 
     def on_train_goal(self, goal: Train.Goal) -> GoalResponse:
-        if self._goal_active.is_set():
-            self.get_logger().warning(f"rejected Train goal for {goal.output_policy}: a goal is running")
-            return GoalResponse.REJECT
+        with self._goal_lock:
+            if self._goal_taken:
+                self.get_logger().warning(f"rejected Train goal for {goal.output_policy}: a goal is running")
+                return GoalResponse.REJECT
+            self._goal_taken = True  # every accepted goal is executed, which gives it back
         return GoalResponse.ACCEPT
 
     def execute_train(self, goal_handle) -> Train.Result:
+        try:
+            return self._execute_train(goal_handle)
+        finally:
+            with self._goal_lock:
+                self._goal_taken = False
+
+    def _execute_train(self, goal_handle) -> Train.Result:
         goal: Train.Goal = goal_handle.request
         result = Train.Result()
         try:
@@ -172,15 +190,15 @@ class LearnerNode(Node):
                 eval_interval=goal.eval_interval, stop_when_learned=goal.stop_when_learned,
                 keep_replay_buffer=goal.keep_replay_buffer,
             )
-            spec.check(self.max_eval_episodes)
+            spec.check(self.max_eval_episodes, self.max_step_budget)
             self.policies.record(spec.initial_policy)  # an unknown policy fails here, not mid-goal
+            self.policies.check_writable(spec.output_policy)
         except (ValueError, KeyError) as error:
             result.message = str(error)
             self.get_logger().warning(f"refused Train goal: {result.message}")
             goal_handle.abort()
             return result
 
-        self._goal_active.set()
         try:
             with self.sim_lock:
                 self.sim.wait_for_sim(self.sim_timeout)
@@ -191,18 +209,22 @@ class LearnerNode(Node):
                     on_progress=lambda progress: self._publish_progress(goal_handle, spec, progress),
                     should_stop=lambda: self._stop_reason(goal_handle),
                     between_steps=self.run_jobs,
+                    on_evaluation=lambda score: self._publish_evaluation(
+                        spec.output_policy, [TaskScore(task=score.task, successes=score.successes,
+                                                       episodes=score.episodes)], "train"),
                 )
                 self.run_jobs()  # whatever arrived after the last step
         except Exception as error:  # noqa: BLE001 - the client gets the reason; the node keeps serving
             if not self.context.ok():  # no client can hear of it; the trainer saved its last whole step
                 self.get_logger().info(f"{goal.output_policy}: stopped by the shutdown ({error})")
                 return result
-            result.message = f"training failed: {type(error).__name__}: {error}"
+            if isinstance(error, GoalFailed):
+                result.steps_used, result.message = error.steps_used, f"training failed: {error}"
+            else:
+                result.message = f"training failed: {type(error).__name__}: {error}"
             self.get_logger().error(result.message)
             goal_handle.abort()
             return result
-        finally:
-            self._goal_active.clear()
 
         result.learned, result.steps_used, result.message = outcome.learned, outcome.steps_used, outcome.message
         if outcome.score is not None:
@@ -212,8 +234,6 @@ class LearnerNode(Node):
         self.get_logger().info(f"{spec.output_policy}: {outcome.message}")
         if not self.context.ok():
             return result  # shutting down: nothing can be published any more
-        if outcome.score is not None:
-            self._publish_evaluation(spec.output_policy, [result.score], "train")
         result.episodes = [EpisodeOutcome(task=e.task, episode_return=e.episode_return, length=e.length,
                                           success=e.success) for e in outcome.episodes]
         if goal_handle.is_cancel_requested:
@@ -227,7 +247,7 @@ class LearnerNode(Node):
     def close(self) -> None:
         """Give a running Train goal a moment to stop at a step and write its checkpoint."""
         deadline = time.monotonic() + CLOSE_TIMEOUT_SEC
-        while self._goal_active.is_set() and time.monotonic() < deadline:
+        while self._goal_taken and time.monotonic() < deadline:
             time.sleep(0.05)
 
     def _stop_reason(self, goal_handle) -> str:
@@ -238,15 +258,18 @@ class LearnerNode(Node):
         return ""
 
     def _publish_progress(self, goal_handle, spec: TrainSpec, progress: TrainProgress) -> None:
+        # float32 fields take Python floats only: with rclpy's field checks off (Jazzy's default) an
+        # int reaches the C conversion unchecked and is read as 0.0 (the "every score is 0" bug).
+        latest_score, recent_success_rate = float(progress.latest_score), float(progress.recent_success_rate)
         goal_handle.publish_feedback(Train.Feedback(
-            steps=progress.steps, episodes=progress.episodes, recent_success_rate=progress.recent_success_rate,
-            latest_score=progress.latest_score,
+            steps=progress.steps, episodes=progress.episodes, recent_success_rate=recent_success_rate,
+            latest_score=latest_score,
         ))
         message = TrainingProgress(
             output_policy=spec.output_policy, task=spec.task, goal_steps=progress.steps,
             step_budget=spec.step_budget, learner_steps=self.trainer.total_steps, episodes=progress.episodes,
-            recent_success_rate=progress.recent_success_rate, latest_score=progress.latest_score,
-            env_steps_per_second=progress.steps_per_second,
+            recent_success_rate=recent_success_rate, latest_score=latest_score,
+            env_steps_per_second=float(progress.steps_per_second),
         )
         message.header.stamp = self.get_clock().now().to_msg()
         self.progress_pub.publish(message)

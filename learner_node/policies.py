@@ -62,6 +62,14 @@ class PolicyRegistry:
             raise ValueError(f"{RANDOM_POLICY!r} is built in and has no model")
         return self._store_of(name).model_path(name)
 
+    def check_writable(self, name: str) -> None:
+        """Raise ``ValueError`` unless a goal may write ``name``: a policy of the learner's own store, or new.
+
+        A written ``prior`` would hide the shipped one (the learner's store is looked in first).
+        """
+        if name not in self.store and any(name in store for store in self.read_only):
+            raise ValueError(f"policy {name!r} is shipped read-only: write another name")
+
     def copy(self, source: str, destination: str) -> PolicyRecord:
         """Copy a stored policy into the learner's own store under a new name."""
         if destination == RANDOM_POLICY or destination in self.names():

@@ -55,6 +55,9 @@ from learner_node.vec_env import BatchVecEnv, FinishedEpisode, TaskCycle
 #: B as a share of the evaluation episodes: the paper's 75 of 100.
 DEFAULT_THRESHOLD_FRACTION = 0.75
 DEFAULT_EVAL_EPISODES = 100
+#: Largest step budget of one goal: the paper's whole run is 4M steps; a budget beyond this is a typo
+#: (or 2^64 - 1), and would train until cancelled.
+DEFAULT_MAX_STEP_BUDGET = 100_000_000
 CHECKPOINT_FILE = "checkpoint.json"
 FINISHED_FILE = "finished.json"
 
@@ -74,7 +77,7 @@ class TrainSpec:
     stop_when_learned: bool = False
     keep_replay_buffer: bool = False
 
-    def check(self, max_eval_episodes: int = 1_000_000) -> None:
+    def check(self, max_eval_episodes: int = 1_000_000, max_step_budget: int = DEFAULT_MAX_STEP_BUDGET) -> None:
         """Raise ``ValueError`` with a message a user can act on."""
         if not self.task and not self.episode_tasks:
             raise ValueError("a goal needs a task or episode_tasks")
@@ -86,14 +89,24 @@ class TrainSpec:
             raise ValueError(f"{RANDOM_POLICY!r} has no model to train from: start from a stored policy")
         if self.output_policy == RANDOM_POLICY:
             raise ValueError(f"{RANDOM_POLICY!r} is built in and cannot be written")
-        if self.step_budget < 1:
-            raise ValueError(f"step_budget must be at least 1, got {self.step_budget}")
+        if not 1 <= self.step_budget <= max_step_budget:
+            raise ValueError(f"step_budget {self.step_budget} outside 1..{max_step_budget}")
         if not 0 <= self.threshold < self.eval_episodes:
             raise ValueError(f"threshold {self.threshold} must lie in [0, eval_episodes={self.eval_episodes})")
         if not 1 <= self.eval_episodes <= max_eval_episodes:
             raise ValueError(f"eval_episodes {self.eval_episodes} outside 1..{max_eval_episodes}")
         if self.eval_interval < 0:
             raise ValueError(f"eval_interval must not be negative, got {self.eval_interval}")
+
+
+class GoalFailed(RuntimeError):
+    """Training stopped on an error (the sim went away): what it trained is in the checkpoint."""
+
+    def __init__(self, error: Exception, steps_used: int, checkpoint_step: int):
+        super().__init__(f"{type(error).__name__}: {error} (after {steps_used} steps; "
+                         f"checkpoint at step {checkpoint_step}, which the same goal resumes)")
+        self.steps_used = steps_used
+        self.checkpoint_step = checkpoint_step
 
 
 @dataclass
@@ -147,8 +160,14 @@ class Trainer:
         on_progress: Callable[[TrainProgress], None] = lambda progress: None,
         should_stop: Callable[[], str] = lambda: "",
         between_steps: Callable[[], bool] = lambda: False,
+        on_evaluation: Callable[[Score], None] = lambda score: None,
     ) -> TrainOutcome:
-        """Run ``spec`` to its end; ``should_stop`` returns a reason to stop early ("" to go on)."""
+        """Run ``spec`` to its end; ``should_stop`` returns a reason to stop early ("" to go on).
+
+        ``on_evaluation`` hears every evaluation of ``spec.task`` the goal runs (the check before
+        the first step, each interval, the end) as soon as it is scored: the record of what the
+        goal's decisions were based on.
+        """
         import torch
         from stable_baselines3.common.callbacks import BaseCallback
 
@@ -158,14 +177,18 @@ class Trainer:
         if finished is not None:
             return finished
         state = _GoalState()
-        evaluate_now = {"due": False}
 
         def between() -> bool:
             used = between_steps()
-            if evaluate_now["due"]:
-                evaluate_now["due"] = False
+            # This step's count: SB3 adds the step to num_timesteps after it returns. Evaluating
+            # here, not in the callback that follows, scores the policy at exactly the interval
+            # (SB3's callback would see the same model: updates through the step before), and a
+            # goal that then stops has steps_used equal to the evaluation's step, so the end
+            # does not evaluate it again (a second score could undo "learned").
+            steps = model.num_timesteps + vec_env.num_envs - goal_start_timesteps
+            if spec.task and spec.eval_interval and steps - state.steps_at_last_eval >= spec.eval_interval:
                 updates.pay()
-                self._evaluate_task(model, spec, state)
+                self._evaluate_task(model, spec, state, steps, on_evaluation)
                 used = True
             return used
 
@@ -179,7 +202,7 @@ class Trainer:
         vec_env.while_stepping = updates.pay
         if spec.stop_when_learned and spec.task and state.score is None:
             # "Train until S > B" checks first: a policy that passes already is not trained.
-            self._evaluate_task(model, spec, state)
+            self._evaluate_task(model, spec, state, state.steps_used, on_evaluation)
         recent = deque(maxlen=50)
         started, stop_reason = time.monotonic(), ""
         goal_start_timesteps = model.num_timesteps - state.steps_used
@@ -196,8 +219,6 @@ class Trainer:
                     episode = vec_env.finished.popleft()
                     state.episodes.append(asdict(episode))
                     recent.append(episode.success)
-                if spec.task and spec.eval_interval and steps - state.steps_at_last_eval >= spec.eval_interval:
-                    evaluate_now["due"] = True  # runs between this step and the next
                 now = time.monotonic()
                 if now - last["progress"] >= trainer.progress_interval_sec:
                     last["progress"] = now
@@ -220,18 +241,21 @@ class Trainer:
             try:
                 with updates:
                     model.learn(remaining, callback=GoalCallback(), reset_num_timesteps=False, progress_bar=False)
-            except BaseException:
+            except BaseException as error:
                 # The sim went away, or the process is stopping: keep what was trained.
                 if state.steps_used > last["checkpoint"]:
                     self._save_checkpoint(checkpoint_dir, spec, model, state)
+                    last["checkpoint"] = state.steps_used
                 self._warm = None
+                if isinstance(error, Exception):
+                    raise GoalFailed(error, state.steps_used, last["checkpoint"]) from error
                 raise
         if stop_reason:
             self._save_checkpoint(checkpoint_dir, spec, model, state)
             self._warm = None
             return self._outcome(state, False, f"stopped after {state.steps_used} steps: {stop_reason}")
         if spec.task and (state.score is None or state.steps_at_last_eval != state.steps_used):
-            self._evaluate_task(model, spec, state)
+            self._evaluate_task(model, spec, state, state.steps_used, on_evaluation)
         stored = self._store(spec, model, state)
         verdict = ("learned" if state.learned else "not learned") if spec.task else "trained"
         message = f"{verdict} after {state.steps_used} steps"
@@ -288,12 +312,15 @@ class Trainer:
         model.learning_starts = model.num_timesteps + SAC_KWARGS["batch_size"]
         return model, 0
 
-    def _evaluate_task(self, model, spec: TrainSpec, state: _GoalState) -> None:
+    def _evaluate_task(self, model, spec: TrainSpec, state: _GoalState, steps: int,
+                       on_evaluation: Callable[[Score], None]) -> None:
+        """Score ``model`` on the goal's task as the policy after ``steps`` of the goal's training steps."""
         (score,) = evaluate(self.envs, lambda obs: model.predict(obs, deterministic=True)[0], [spec.task],
                             spec.eval_episodes, policy_name=spec.output_policy, global_step=self.total_steps)
         state.score = asdict(score)
         state.learned = score.successes > spec.threshold
-        state.steps_at_last_eval = state.steps_used
+        state.steps_at_last_eval = steps
+        on_evaluation(score)
 
     def _store(self, spec: TrainSpec, model, state: _GoalState) -> PolicyRecord:
         parent = self.policies.record(spec.initial_policy)

@@ -29,6 +29,9 @@ os.environ["ROS_LOG_DIR"] = tempfile.mkdtemp(prefix="glocal-ros-log-")
 os.environ["ROS_HOME"] = tempfile.mkdtemp(prefix="glocal-ros-home-")
 os.environ.setdefault("AMENT_PREFIX_PATH", sys.prefix)
 os.environ["PYTHONUNBUFFERED"] = "1"
+# rclpy checks message field types only when asked (off by default in Jazzy); unchecked, an int in a
+# float32 field reaches the C conversion and is sent as 0.0. Tests and the nodes they start check.
+os.environ["ROS_PYTHON_CHECK_FIELDS"] = "1"
 
 
 def pytest_sessionfinish(session, exitstatus):
