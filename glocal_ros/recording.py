@@ -15,6 +15,7 @@ recorder's bag), ``message_counts``, and the EpisodeRecord.seq checks
 from __future__ import annotations
 
 import bisect
+import os
 import struct
 import threading
 from contextlib import contextmanager
@@ -84,7 +85,17 @@ def _offered_qos(spec: TopicSpec) -> Qos:
 
 
 class BagWriter:
-    """A rosbag2 directory being written; thread-safe ``write``."""
+    """A rosbag2 directory being written; thread-safe ``write`` and ``flush``.
+
+    rosbags' MCAP writer keeps a chunk in memory until it holds 1 MiB, so a
+    killed writer loses everything since its last full chunk, the schemas and
+    channels too. ``flush`` closes the pending chunk and pushes the file to
+    disk (the schema and channel records go first, at open): what a kill can
+    lose is what came after the last flush, and ``glocal-ros bag repair``
+    recovers every chunk before it. It reaches into rosbags' ``McapWriter``
+    (``storage.close_chunk``, ``storage.bio``), which rosbags does not offer
+    as API: constraints.txt pins the version, and test_bags checks it.
+    """
 
     def __init__(self, path: Path, topics: tuple[TopicSpec, ...] = GRAPH_TOPICS, typestore: Typestore | None = None):
         self.path = Path(path)
@@ -100,11 +111,25 @@ class BagWriter:
         }
         self._lock = threading.Lock()
         self.counts = {spec.name: 0 for spec in topics}
+        self._unflushed = True  # the schema and channel records
+        self.flush()
 
     def write(self, topic: str, timestamp_ns: int, data: bytes) -> None:
         with self._lock:
             self._writer.write(self._connections[topic], timestamp_ns, data)
             self.counts[topic] += 1
+            self._unflushed = True
+
+    def flush(self) -> None:
+        """Close the pending chunk and sync the file: a kill after this loses nothing written before it."""
+        with self._lock:
+            if not self._unflushed:
+                return
+            storage = self._writer.storage
+            storage.close_chunk()
+            storage.bio.flush()
+            os.fsync(storage.bio.fileno())
+            self._unflushed = False
 
     def close(self) -> None:
         with self._lock:

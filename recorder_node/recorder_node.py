@@ -8,7 +8,8 @@ EpisodeRecord.seq is checked as episodes arrive: every gap (an episode the
 recorder never got) is logged as a warning when it is seen, and the total
 with every gap when the bag closes (``glocal-ros bag check`` does the same
 on a bag afterwards). A recorder that was killed leaves a bag without
-metadata.yaml: ``glocal-ros bag repair`` recovers it.
+metadata.yaml: ``glocal-ros bag repair`` recovers it, up to the last flush:
+every ``flush_interval_sec`` the pending chunk is closed and synced to disk.
 """
 
 from __future__ import annotations
@@ -47,7 +48,10 @@ class RecorderNode(Node):
     def __init__(self) -> None:
         super().__init__("recorder_node")
         output = declare(self, "output", "bag", "rosbag2 directory to create (must not exist)")
+        flush_interval = declare(self, "flush_interval_sec", 2.0, "seconds between chunk flushes to disk: "
+                                 "the most a killed recorder loses", min_value=0.1, max_value=86_400.0)
         self.writer = BagWriter(Path(output))
+        self.create_timer(flush_interval, self.writer.flush)
         self.episode_seqs = SequenceTracker()
         for spec in GRAPH_TOPICS:
             self.create_subscription(
