@@ -22,6 +22,9 @@ from glocal_ros.files import atomic_write
 
 METADATA_FILE = "policy.json"
 _NAME = re.compile(r"^[A-Za-z0-9_][A-Za-z0-9_.-]{0,127}$")
+#: The only model file names a store writes: a policy.json naming anything else (``../x``, an
+#: absolute path) would make a load read outside the store.
+_MODEL_FILE = re.compile(r"^model-([1-9][0-9]{0,17})\.zip$")
 
 
 class UnknownPolicyError(KeyError):
@@ -68,7 +71,11 @@ class PolicyStore:
         path = self.root / check_name(name) / METADATA_FILE
         if not path.is_file():
             raise UnknownPolicyError(name)
-        return PolicyRecord(**json.loads(path.read_text()))
+        record = PolicyRecord(**json.loads(path.read_text()))
+        if record.model_file and not _MODEL_FILE.match(record.model_file):
+            raise ValueError(f"{path}: model_file {record.model_file!r} is not a model file of this store "
+                             f"(model-<N>.zip): refusing to load it")
+        return record
 
     def model_path(self, name: str) -> Path:
         return self.root / name / self.record(name).model_file
@@ -104,7 +111,7 @@ class PolicyStore:
         folder = self.root / check_name(record.name)
         folder.mkdir(parents=True, exist_ok=True)
         previous = self.record(record.name).model_file if record.name in self else ""
-        version = int(previous[len("model-"):-len(".zip")]) + 1 if previous else 1
+        version = int(_MODEL_FILE.match(previous).group(1)) + 1 if previous else 1
         record.model_file, record.updated = f"model-{version}.zip", _now()
         atomic_write(folder / record.model_file, write_model)
         self._write_record(record)

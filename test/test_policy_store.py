@@ -1,5 +1,6 @@
 """The policy store: named SB3 policies on disk, written atomically."""
 
+import json
 import subprocess
 import sys
 
@@ -48,6 +49,17 @@ def test_unknown_and_invalid_names(tmp_path):
     for bad in ("../escape", "", "a/b", ".hidden"):
         with pytest.raises(ValueError, match="invalid policy name"):
             store.record(bad)
+
+
+@pytest.mark.parametrize("model_file", ["../other/model-1.zip", "/etc/passwd", "model-1.zip/..", "evil.pkl"])
+def test_a_model_file_outside_the_store_naming_is_refused(tmp_path, model, model_file):
+    """policy.json is data anyone may edit; the model it names is unpickled: it must be the store's own."""
+    store = PolicyStore(tmp_path)
+    store.save(model, PolicyRecord(name="G1"))
+    metadata = tmp_path / "G1" / "policy.json"
+    metadata.write_text(metadata.read_text().replace('"model-1.zip"', json.dumps(model_file)))
+    with pytest.raises(ValueError, match="is not a model file of this store"):
+        store.load("G1")
 
 
 def test_a_kill_during_save_never_corrupts_the_store(tmp_path, model):
