@@ -59,7 +59,11 @@ def cmd_evaluate(args: argparse.Namespace) -> int:
 def cmd_launch(args: argparse.Namespace) -> int:
     from node_common.launch import launch
 
-    return launch(args.strategy, args.preset, args.seed, args.out)
+    if args.watchdog is None:
+        return launch(args.strategy, args.preset, args.seed, args.out)
+    if args.watchdog <= 0:
+        raise ValueError(f"--watchdog must be positive, got {args.watchdog}")
+    return launch(args.strategy, args.preset, args.seed, args.out, watchdog_sec=args.watchdog)
 
 
 def cmd_experiment(args: argparse.Namespace) -> int:
@@ -148,6 +152,20 @@ def cmd_bench_learner(args: argparse.Namespace) -> int:
     print(report, end="")
     print(f"written to {args.out}")
     return 0
+
+
+def cmd_bench_graph(args: argparse.Namespace) -> int:
+    from curriculum_node.bench import graph_bench_report, run_graph_bench
+
+    if args.goals < 1 or args.calls < 1:
+        raise ValueError("--goals and --calls must be at least 1")
+    rows = run_graph_bench(args.goals, args.calls)
+    report = graph_bench_report(rows, "glocal-ros " + " ".join(sys.argv[1:]))
+    args.out.parent.mkdir(parents=True, exist_ok=True)
+    args.out.write_text(report)
+    print(report, end="")
+    print(f"written to {args.out}")
+    return 0 if all(row.lost == 0 for row in rows) else 1
 
 
 def cmd_train_prior(args: argparse.Namespace) -> int:
@@ -239,6 +257,12 @@ def build_parser() -> argparse.ArgumentParser:
     bench_sim.add_argument("--rounds", type=int, default=3, help="alternating rounds; the median is reported")
     bench_sim.add_argument("--out", type=Path, default=Path("bench/results/sim.md"))
     bench_sim.set_defaults(func=cmd_bench_sim)
+    bench_graph = bench_commands.add_parser("graph", help="lost answers under stress: Train goals, learner/evaluate "
+                                            "and sim/step calls, 1 and 4 threads, with and without a CPU burner")
+    bench_graph.add_argument("--goals", type=int, default=1000, help="short Train goals per row")
+    bench_graph.add_argument("--calls", type=int, default=5000, help="service calls per row")
+    bench_graph.add_argument("--out", type=Path, default=Path("bench/results/graph.md"))
+    bench_graph.set_defaults(func=cmd_bench_graph)
     bench_learner = bench_commands.add_parser("learner", help="SAC env steps/s with updates, in-process vs through "
                                               "sim_node and learner_node")
     bench_learner.add_argument("--envs", default="1,2,4", help="comma-separated env counts N")
@@ -266,6 +290,8 @@ def build_parser() -> argparse.ArgumentParser:
     launch.add_argument("--seed", type=int, default=0)
     launch.add_argument("--out", type=Path, required=True,
                         help="run directory: gets bag/, policies/, curriculum/, logs/ and report/")
+    launch.add_argument("--watchdog", type=float, default=None, metavar="SEC",
+                        help="stop the graph (resumable) when nothing moves for SEC seconds (default: a minute)")
     launch.set_defaults(func=cmd_launch)
 
     experiment = commands.add_parser("experiment", help="strategies x seeds as separate runs (resumable), "

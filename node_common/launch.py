@@ -13,6 +13,14 @@ learner's policies and checkpoints (``policies/``), one bag per launch
 The seed goes to sim, learner and curriculum alike, so that a run with the
 same seed repeats this one.
 
+A watchdog stops a hung run instead of letting it wait: when a node process
+ends before the curriculum does, or nothing moves for ``watchdog_sec``
+(no episode, no training progress, no curriculum state: a running graph
+sends one of those every few seconds, evaluating or training), the launch
+says what it last heard, what the curriculum was waiting for and whether
+the learner still answers, stops the graph as Ctrl-C does, and exits with
+``EXIT_STALLED``; the same command resumes the run.
+
 ``experiment`` runs strategies x seeds as separate launches into
 ``OUT/<strategy>-seed<N>/``, skips runs already finished, resumes the others,
 then writes one report over all of them.
@@ -27,7 +35,8 @@ from pathlib import Path
 from typing import Sequence
 
 import rclpy
-from glocal_interfaces.msg import CurriculumState, TrainingProgress
+from glocal_interfaces.msg import CurriculumState, EpisodeRecord, TrainingProgress
+from glocal_interfaces.srv import ListPolicies
 
 from glocal_ros.domain import reserve_domain_id
 from glocal_ros.paths import assets_dir
@@ -38,6 +47,47 @@ from node_common import names, qos
 STATUS_NAMES = {value: name.removeprefix("STATUS_").lower() for name, value in vars(CurriculumState).items()
                 if name.startswith("STATUS_")}
 RUN_FILE = "run.json"
+#: Seconds without an episode, a progress report or a curriculum state before a run counts as hung.
+#: Longer than the curriculum's own re-send of an unanswered goal (ros_learner.GOAL_RESPONSE_TIMEOUT_SEC).
+DEFAULT_WATCHDOG_SEC = 60.0
+EXIT_STALLED = 3
+LEARNER_PROBE_SEC = 5.0
+
+
+class GraphStalled(RuntimeError):
+    """A node of the run ended early, or the run made no progress: the message says which and where."""
+
+
+class Watchdog:
+    """When the graph was last heard from, and what it said."""
+
+    def __init__(self, silence_sec: float):
+        self.silence_sec = silence_sec
+        self.last_heard: dict[str, float] = {}
+        self.started = time.monotonic()
+
+    def heard(self, what: str) -> None:
+        self.last_heard[what] = time.monotonic()
+
+    def silent_for(self) -> float:
+        return time.monotonic() - max(self.last_heard.values(), default=self.started)
+
+    def describe_silence(self, state: CurriculumState | None, progress: TrainingProgress | None) -> str:
+        now = time.monotonic()
+        heard = ", ".join(f"{what} {now - when:.0f} s ago" for what, when in sorted(self.last_heard.items(),
+                                                                                     key=lambda item: -item[1]))
+        text = f"no progress for {self.silent_for():.0f} s (last heard: {heard or 'nothing'})"
+        if state is not None:
+            status = STATUS_NAMES.get(state.status, state.status)
+            text += f"; the curriculum was {status} {state.current_task or ''}".rstrip()
+            if state.status in (CurriculumState.STATUS_TRAINING, CurriculumState.STATUS_TRAINING_GLOBAL,
+                                CurriculumState.STATUS_TRAINING_LOCAL):
+                text += f", waiting for learner/train ({state.current_policy})"
+            elif state.status == CurriculumState.STATUS_EVALUATING:
+                text += ", waiting for learner/evaluate"
+        if progress is not None:
+            text += f"; the learner last reported {progress.output_policy} at step {progress.goal_steps}"
+        return text
 
 
 def preset_file(preset: str) -> Path:
@@ -93,6 +143,7 @@ class Progress:
 
         self.bar = tqdm(total=0, unit="step", desc="training", dynamic_ncols=True)
         self.state: CurriculumState | None = None
+        self.progress: TrainingProgress | None = None
         self.goal_steps = 0
         self.shown_iteration = None
 
@@ -104,7 +155,7 @@ class Progress:
         self._draw()
 
     def on_progress(self, progress: TrainingProgress) -> None:
-        self.goal_steps = progress.goal_steps
+        self.progress, self.goal_steps = progress, progress.goal_steps
         self._draw()
 
     def _draw(self) -> None:
@@ -124,8 +175,33 @@ class Progress:
             print(describe(self.state))
 
 
+def learner_answers(node, timeout_sec: float = LEARNER_PROBE_SEC) -> bool:
+    """Whether learner_node answers learner/list_policies (served beside a running goal) in time."""
+    client = node.create_client(ListPolicies, names.LEARNER_LIST_POLICIES)
+    try:
+        future = client.call_async(ListPolicies.Request())
+        rclpy.spin_until_future_complete(node, future, timeout_sec=timeout_sec)
+        return future.done()
+    finally:
+        node.destroy_client(client)
+
+
+def check_graph(node, watchdog: Watchdog, progress: Progress, started: Sequence[NodeProcess],
+                curriculum: NodeProcess) -> None:
+    """Raise ``GraphStalled`` when a node other than the curriculum ended, or the run stopped moving."""
+    for process in started:
+        if process is not curriculum and not process.running:
+            raise GraphStalled(f"{process.node} ended (exit code {process.process.returncode}) while the run "
+                               f"went on: see {process.log_path}")
+    if watchdog.silent_for() > watchdog.silence_sec:
+        text = watchdog.describe_silence(progress.state, progress.progress)
+        answers = learner_answers(node)
+        text += "; learner_node answers requests" if answers else "; learner_node does not answer requests"
+        raise GraphStalled(text)
+
+
 def launch(strategy: str, preset: str, seed: int, run_dir: Path, startup_timeout: float = 120.0,
-           report: bool = True) -> int:
+           report: bool = True, watchdog_sec: float = DEFAULT_WATCHDOG_SEC) -> int:
     params_file = preset_file(preset)
     resumed = claim_run_dir(run_dir, strategy, preset, seed)
     logs = run_dir / "logs"
@@ -138,8 +214,17 @@ def launch(strategy: str, preset: str, seed: int, run_dir: Path, startup_timeout
     rclpy.init(domain_id=domain_id)
     node = rclpy.create_node("glocal_ros_launch")
     progress = Progress()
-    node.create_subscription(CurriculumState, names.CURRICULUM_STATE, progress.on_state, qos.LATCHED)
-    node.create_subscription(TrainingProgress, names.TRAINING_PROGRESS, progress.on_progress, qos.EVENTS)
+    watchdog = Watchdog(watchdog_sec)
+
+    def heard(what: str, handle=lambda message: None):
+        return lambda message: (watchdog.heard(what), handle(message))
+
+    node.create_subscription(CurriculumState, names.CURRICULUM_STATE, heard("curriculum state", progress.on_state),
+                             qos.LATCHED)
+    node.create_subscription(TrainingProgress, names.TRAINING_PROGRESS, heard("training progress",
+                                                                              progress.on_progress), qos.EVENTS)
+    # Raw: the watchdog only needs to know that an episode came, not what it holds.
+    node.create_subscription(EpisodeRecord, names.EPISODES, heard("an episode"), qos.EPISODES, raw=True)
     started: list[NodeProcess] = []
 
     def start(name: str, **params) -> NodeProcess:
@@ -159,8 +244,10 @@ def launch(strategy: str, preset: str, seed: int, run_dir: Path, startup_timeout
             if failed or time.monotonic() > deadline:
                 raise RuntimeError(f"{(failed or started)[0].node} did not start: see {(failed or started)[0].log_path}")
         curriculum = start("curriculum_node", strategy=strategy, seed=seed, state_dir=str(run_dir / "curriculum"))
+        watchdog.started = time.monotonic()
         while curriculum.running:
             rclpy.spin_once(node, timeout_sec=0.2)
+            check_graph(node, watchdog, progress, started, curriculum)
         for _ in range(5):  # the last state may still be on its way
             rclpy.spin_once(node, timeout_sec=0.1)
         progress.close()
@@ -171,6 +258,10 @@ def launch(strategy: str, preset: str, seed: int, run_dir: Path, startup_timeout
         progress.close()
         print("interrupted: stopping the graph; the same command resumes the run")
         exit_code = 130
+    except GraphStalled as stalled:
+        progress.close()
+        print(f"the run is stuck: {stalled}\nstopping the graph; the same command resumes the run", flush=True)
+        exit_code = EXIT_STALLED
     finally:
         for process in reversed(started):
             code = process.stop(signal.SIGINT)

@@ -44,7 +44,7 @@ def test_every_strategy_runs_to_the_end_of_its_budget(graph, ros_node, tmp_path,
     wait_until(lambda: node.process.poll() is not None, 240, f"the {strategy} run", processes=graph)
     assert node.process.returncode == 0, node.log()
 
-    wait_until(lambda: states and states[-1].status == CurriculumState.STATUS_FINISHED, 20, "the final state")
+    wait_until(lambda: states and states[-1].status == CurriculumState.STATUS_FINISHED, 60, "the final state")
     final = states[-1]
     assert (final.strategy, final.run_id) == (strategy, f"{strategy}-seed0")
     assert final.step_budget == 300 and final.total_steps <= 302
@@ -79,7 +79,7 @@ def test_a_killed_curriculum_node_resumes_its_run(graph, ros_node, tmp_path):
     assert lines[:len(answered)] == answered, "the journal was continued, not rewritten"
     evaluations_of_prior = [line for line in lines if '"call": "evaluate"' in line and '"policy": "prior"' in line]
     assert len(evaluations_of_prior) == 1, "the first evaluation was not asked again"
-    wait_until(lambda: states and states[-1].status == CurriculumState.STATUS_FINISHED, 20, "the final state")
+    wait_until(lambda: states and states[-1].status == CurriculumState.STATUS_FINISHED, 60, "the final state")
     assert states[-1].total_steps <= 302
 
 

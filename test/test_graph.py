@@ -41,7 +41,7 @@ def test_curriculum_decision_travels_through_learner_and_sim(start_node, ros_nod
     best = state.clusters[0]
     assert state.global_task == best.tasks[len(best.tasks) // 2]
     assert sorted([state.global_task, *state.local_tasks]) == sorted(best.tasks)
-    wait_until(lambda: assignments, 10, "the global task's assignment", processes=processes[:-1])
+    wait_until(lambda: assignments, 60, "the global task's assignment", processes=processes[:-1])
     assert (assignments[0].role, assignments[0].task) == (TaskAssignment.ROLE_GLOBAL, state.global_task)
     assert (assignments[0].initial_policy, assignments[0].output_policy) == ("prior", "glocal-seed3.G1")
     assert all(a.role == TaskAssignment.ROLE_LOCAL for a in assignments[1:])

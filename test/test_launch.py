@@ -1,5 +1,6 @@
 """`glocal-ros launch` and `experiment` on the smoke preset: runs, records, reports, resumes."""
 
+import os
 import signal
 import subprocess
 import sys
@@ -97,3 +98,36 @@ def test_experiment_runs_each_strategy_and_seed_then_reports(tmp_path):
 
     again = subprocess.run(command, capture_output=True, text=True, timeout=120, cwd=REPO)
     assert again.returncode == 0 and again.stdout.count("finished before") == 2, again.stdout
+
+
+def test_a_hung_learner_is_reported_the_graph_stopped_and_the_run_resumes(tmp_path):
+    """The learner frozen (SIGSTOP) mid-run: within the watchdog's time the launch names what it was
+    waiting for and that the learner does not answer, stops the graph and exits 3; the same command
+    then finishes the run."""
+    run_dir = tmp_path / "run"
+    command = [*CLI, "launch", "--preset", "smoke", "--out", str(run_dir), "--seed", "1", "--watchdog", "10"]
+    launched = subprocess.Popen(command, stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True, cwd=REPO)
+    journal = run_dir / "curriculum" / "journal.jsonl"
+    try:
+        deadline = time.monotonic() + 240
+        while not (journal.is_file() and '"call": "train"' in journal.read_text()):
+            assert launched.poll() is None and time.monotonic() < deadline, "the run did not get to a Train goal"
+            time.sleep(0.2)
+        learner = subprocess.run(["pgrep", "-f", f"learner_node.*{run_dir}"], capture_output=True, text=True)
+        pids = [int(pid) for pid in learner.stdout.split()]
+        assert pids, "no learner_node process of this run"
+        frozen = time.monotonic()
+        for pid in pids:
+            os.kill(pid, signal.SIGSTOP)
+        output = launched.communicate(timeout=240)[0]
+    finally:
+        if launched.poll() is None:
+            launched.kill()
+    assert launched.returncode == 3, output
+    assert "the run is stuck: no progress for" in output and "learner_node does not answer" in output, output
+    assert "the same command resumes the run" in output
+    assert time.monotonic() - frozen < 120
+
+    resumed = launch(run_dir, "--seed", "1")
+    assert resumed.returncode == 0, resumed.stdout + resumed.stderr
+    assert "report:" in resumed.stdout

@@ -43,7 +43,7 @@ def test_evaluate_scores_every_task(learner, ros_node):
     assert response.success, response.message
     assert [(s.task, s.episodes) for s in response.scores] == [("A0", 3), ("D3", 3), ("G6", 3)]
     assert all(0 <= s.successes <= 3 for s in response.scores)
-    wait_until(lambda: evaluations, 10, "the evaluation on glocal/evaluations", processes=[process])
+    wait_until(lambda: evaluations, 60, "the evaluation on glocal/evaluations", processes=[process])
     assert evaluations[0].policy == "random" and evaluations[0].purpose == "request"
 
     policies = call(ros_node.create_client(ListPolicies, names.LEARNER_LIST_POLICIES), ListPolicies.Request())

@@ -50,7 +50,7 @@ def test_lockstep_batch_and_episode_stream(sim, ros_node):
         assert list(response.truncated) == [(k + 1) % T == 0] * NUM_ENVS
     assert response.tasks == ["C2", "B1"]
 
-    wait_until(lambda: len(episodes) >= 3 * NUM_ENVS, 10, "6 episode records", processes=[process])
+    wait_until(lambda: len(episodes) >= 3 * NUM_ENVS, 60, "6 episode records", processes=[process])
     assert [e.seq for e in episodes] == list(range(len(episodes)))
     record = episodes[0]
     assert (record.task, record.phase, record.policy_name, record.length) == ("A0", 1, "zeros", T)
@@ -59,7 +59,7 @@ def test_lockstep_batch_and_episode_stream(sim, ros_node):
     assert len(record.actions) == T * 5 and len(record.rewards) == T
     assert len(record.joint_positions) == (T + 1) * len(record.joint_names) == (T + 1) * 9
     assert record.truncated and not record.success and not record.interrupted
-    wait_until(lambda: joint_states, 10, "joint states for viewers", processes=[process])
+    wait_until(lambda: joint_states, 60, "joint states for viewers", processes=[process])
 
 
 @pytest.mark.parametrize("request_fields, message", [
