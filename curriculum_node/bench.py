@@ -11,7 +11,8 @@ MultiThreadedExecutor as the curriculum node is. Rows:
 - ``sim/step``: random actions straight to the sim's batched step.
 
 Services run sequentially and from 4 threads at once; goals only one after
-another (the learner runs one at a time). Every row runs without and with a
+another (the learner runs one at a time). An evaluation (an episode, about
+0.17 s here) costs 20 sim steps and more, hence fewer of them by default. Every row runs without and with a
 CPU burner per core beside it. A call is *lost* when it failed or did not
 answer within ``CALL_TIMEOUT_SEC``; *recovered* counts what ``RosLearner``
 had to do to get an answer (a goal sent again, a result asked for again).
@@ -112,7 +113,8 @@ def timed_calls(call: Callable[[int], None], count: int, threads: int) -> tuple[
     return latencies, lost
 
 
-def run_graph_bench(goals: int, calls: int, log: Callable[[str], None] = print) -> list[GraphBenchRow]:
+def run_graph_bench(goals: int, evaluations: int, steps: int,
+                    log: Callable[[str], None] = print) -> list[GraphBenchRow]:
     from glocal_interfaces.srv import Evaluate, StepEnvs
 
     from curriculum_node.ros_learner import RosLearner
@@ -154,9 +156,9 @@ def run_graph_bench(goals: int, calls: int, log: Callable[[str], None] = print) 
                 call_checked(step, StepEnvs.Request(actions=actions), CALL_TIMEOUT_SEC)
 
             evaluate_once(0)  # an answered request: the learner's side of discovery is done too
-            jobs = [("Train goals", train, goals, 1), ("learner/evaluate", evaluate_once, calls, 1),
-                    ("learner/evaluate", evaluate_once, calls, 4), ("sim/step", step_once, calls, 1),
-                    ("sim/step", step_once, calls, 4)]
+            jobs = [("Train goals", train, goals, 1), ("learner/evaluate", evaluate_once, evaluations, 1),
+                    ("learner/evaluate", evaluate_once, evaluations, 4), ("sim/step", step_once, steps, 1),
+                    ("sim/step", step_once, steps, 4)]
             for burner in (False, True):
                 with burners(burner):
                     for what, call, count, threads in jobs:

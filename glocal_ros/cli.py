@@ -157,9 +157,9 @@ def cmd_bench_learner(args: argparse.Namespace) -> int:
 def cmd_bench_graph(args: argparse.Namespace) -> int:
     from curriculum_node.bench import graph_bench_report, run_graph_bench
 
-    if args.goals < 1 or args.calls < 1:
-        raise ValueError("--goals and --calls must be at least 1")
-    rows = run_graph_bench(args.goals, args.calls)
+    if min(args.goals, args.evaluations, args.steps) < 1:
+        raise ValueError("--goals, --evaluations and --steps must be at least 1")
+    rows = run_graph_bench(args.goals, args.evaluations, args.steps)
     report = graph_bench_report(rows, "glocal-ros " + " ".join(sys.argv[1:]))
     args.out.parent.mkdir(parents=True, exist_ok=True)
     args.out.write_text(report)
@@ -260,7 +260,8 @@ def build_parser() -> argparse.ArgumentParser:
     bench_graph = bench_commands.add_parser("graph", help="lost answers under stress: Train goals, learner/evaluate "
                                             "and sim/step calls, 1 and 4 threads, with and without a CPU burner")
     bench_graph.add_argument("--goals", type=int, default=1000, help="short Train goals per row")
-    bench_graph.add_argument("--calls", type=int, default=5000, help="service calls per row")
+    bench_graph.add_argument("--evaluations", type=int, default=1000, help="learner/evaluate calls per row")
+    bench_graph.add_argument("--steps", type=int, default=5000, help="sim/step calls per row")
     bench_graph.add_argument("--out", type=Path, default=Path("bench/results/graph.md"))
     bench_graph.set_defaults(func=cmd_bench_graph)
     bench_learner = bench_commands.add_parser("learner", help="SAC env steps/s with updates, in-process vs through "
