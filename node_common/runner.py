@@ -51,8 +51,11 @@ def spin_node(make_node: Callable[[], Node], args: Sequence[str] | None = None, 
         pass
     except Exception as error:  # noqa: BLE001 - the process must report any failure and exit non-zero
         logger = node.get_logger() if node is not None else rclpy.logging.get_logger("glocal_ros")
-        logger.fatal(f"{type(error).__name__}: {error}")
-        failed = True
+        if rclpy.ok():
+            logger.fatal(f"{type(error).__name__}: {error}")
+            failed = True
+        else:  # SIGINT/SIGTERM shut the context down while the node was starting: a stop, not a failure
+            logger.info(f"stopped while starting ({type(error).__name__}: {error})")
     finally:
         if node is not None:
             close = getattr(node, "close", None)
