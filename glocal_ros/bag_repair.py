@@ -9,9 +9,11 @@ truncated tail, writes what it recovered through rosbags' Writer as
 zstd chunks, metadata.yaml v9) into a fresh directory, then swaps it in and
 keeps the damaged original next to it as ``BAG.damaged``: nothing is deleted.
 
-What is lost: the recorder's writer keeps the chunk being filled (up to
-1 MiB of messages) in memory, so the messages after the last complete chunk
-never reached the disk. ROS-free.
+What is lost: the recorder's writer keeps the chunk being filled in memory
+until its next flush (every few seconds, or 1 MiB of messages), so the
+messages after the last complete chunk never reached the disk. The space
+the recorder reserved for closing (``RESERVE_FILE``) is freed first: a disk
+that filled up then has room for the repaired copy. ROS-free.
 """
 
 from __future__ import annotations
@@ -29,6 +31,8 @@ from rosbags.rosbag2 import CompressionFormat, CompressionMode, Reader, ReaderEr
 from rosbags.rosbag2.metadata import parse_qos
 from ruamel.yaml import YAML, YAMLError
 from rosbags.typesys import Stores, get_types_from_idl, get_types_from_msg, get_typestore
+
+from glocal_ros.recording import RESERVE_FILE
 
 DAMAGED_SUFFIX = ".damaged"
 _IDL_SEPARATOR = "=" * 80 + "\n"
@@ -198,6 +202,7 @@ def repair_bag(bag: Path) -> RepairResult:
     # The new bag is written beside the old one (same file system, so the swap
     # is two renames), in a folder of its own so that its MCAP file gets the
     # bag's name.
+    (bag / RESERVE_FILE).unlink(missing_ok=True)
     workdir = Path(tempfile.mkdtemp(prefix=f".{bag.name}.repair-", dir=bag.parent))
     writer = Writer(workdir / bag.name, version=9, storage_plugin=StoragePlugin.MCAP)
     writer.set_compression(CompressionMode.STORAGE, CompressionFormat.ZSTD)

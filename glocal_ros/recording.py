@@ -18,8 +18,10 @@ import bisect
 import os
 import struct
 import threading
+from collections import defaultdict
 from contextlib import contextmanager
 from dataclasses import dataclass, field
+from io import BytesIO
 from pathlib import Path
 from typing import Iterable, Iterator
 
@@ -34,6 +36,8 @@ from glocal_ros.paths import interface_definitions_dir
 INTERFACE_PACKAGE = "glocal_interfaces"
 #: The topic whose EpisodeRecord.seq counts a sim node's episodes from 0 without gaps.
 EPISODES_TOPIC = "/glocal/episodes"
+#: The space a recording bag keeps free for closing itself on a full disk (see ``BagWriter``).
+RESERVE_FILE = ".space-reserve"
 
 
 @dataclass(frozen=True)
@@ -84,6 +88,36 @@ def _offered_qos(spec: TopicSpec) -> Qos:
     )
 
 
+class RecordingStopped(OSError):
+    """The bag could not be written (disk full, I/O error) and was closed at its last flush.
+
+    The bag is whole and readable (summary, footer, metadata.yaml): it holds
+    every message up to that flush. ``lost`` counts the messages written
+    after it, which are not in the bag.
+    """
+
+    def __init__(self, path: Path, error: OSError, kept: int, lost: int):
+        super().__init__(error.errno, f"cannot write {path}: {error.strerror or error}; the bag was closed "
+                                      f"at its last flush with {kept} messages ({lost} after it lost)")
+        self.kept = kept
+        self.lost = lost
+
+    def __str__(self) -> str:
+        return self.strerror
+
+
+@dataclass(frozen=True)
+class _Flushed:
+    """What the writers' summaries need, as of the last flush: where a failed bag is cut back to."""
+
+    offset: int
+    chunks: int
+    counts: dict[int, int]
+    timestamps: tuple[int, int]  # rosbags Writer's (min, max)
+    mcap_stats: dict[int, int]
+    mcap_times: tuple[int, int]
+
+
 class BagWriter:
     """A rosbag2 directory being written; thread-safe ``write`` and ``flush``.
 
@@ -92,10 +126,20 @@ class BagWriter:
     channels too. ``flush`` closes the pending chunk and pushes the file to
     disk (the schema and channel records go first, at open): what a kill can
     lose is what came after the last flush, and ``glocal-ros bag repair``
-    recovers every chunk before it. It reaches into rosbags' ``McapWriter``
-    (``storage.close_chunk``, ``storage.bio``), which rosbags does not offer
-    as API: constraints.txt pins the version, and test_bags checks it.
+    recovers every chunk before it.
+
+    A write or flush that fails (a full disk) cuts the file back to the last
+    flush, frees a reserve of ``RESERVE_BYTES`` taken at open, and closes the
+    bag there, so that its summary and metadata.yaml still fit; it then raises
+    ``RecordingStopped``, and so does every later write. This reaches into
+    rosbags' ``Writer`` and ``McapWriter`` (``storage.close_chunk``,
+    ``storage.bio``, their counters), which rosbags does not offer as API:
+    constraints.txt pins the version, and test_bags checks it.
     """
+
+    #: Room for a closing summary (chunk indexes: ~100 bytes a chunk, a chunk per flush or MiB)
+    #: and metadata.yaml: enough for ~80,000 chunks.
+    RESERVE_BYTES = 8 * 2**20
 
     def __init__(self, path: Path, topics: tuple[TopicSpec, ...] = GRAPH_TOPICS, typestore: Typestore | None = None):
         self.path = Path(path)
@@ -103,6 +147,13 @@ class BagWriter:
         self._writer = Writer(self.path, version=9, storage_plugin=StoragePlugin.MCAP)
         self._writer.set_compression(CompressionMode.STORAGE, CompressionFormat.ZSTD)
         self._writer.open()
+        self._reserve = self.path / RESERVE_FILE
+        try:
+            with self._reserve.open("wb") as reserve:
+                os.posix_fallocate(reserve.fileno(), 0, self.RESERVE_BYTES)
+        except OSError as error:
+            raise OSError(error.errno, f"cannot reserve {self.RESERVE_BYTES} bytes at {self._reserve} for "
+                                       f"closing the bag: {error.strerror or error}") from error
         self._connections = {
             spec.name: self._writer.add_connection(
                 spec.name, spec.msgtype, typestore=self.typestore, offered_qos_profiles=[_offered_qos(spec)]
@@ -111,29 +162,88 @@ class BagWriter:
         }
         self._lock = threading.Lock()
         self.counts = {spec.name: 0 for spec in topics}
+        self._flushed_counts = dict(self.counts)
+        self._flushed: _Flushed | None = None
+        self._stopped: RecordingStopped | None = None
         self._unflushed = True  # the schema and channel records
         self.flush()
 
+    @property
+    def stopped(self) -> RecordingStopped | None:
+        """Why the bag was closed early, None while it records."""
+        return self._stopped
+
     def write(self, topic: str, timestamp_ns: int, data: bytes) -> None:
         with self._lock:
-            self._writer.write(self._connections[topic], timestamp_ns, data)
+            if self._stopped:
+                raise self._stopped
+            try:
+                self._writer.write(self._connections[topic], timestamp_ns, data)
+            except OSError as error:
+                self._close_at_last_flush(error, unwritten=1)
             self.counts[topic] += 1
             self._unflushed = True
 
     def flush(self) -> None:
         """Close the pending chunk and sync the file: a kill after this loses nothing written before it."""
         with self._lock:
+            if self._stopped:
+                raise self._stopped
             if not self._unflushed:
                 return
             storage = self._writer.storage
-            storage.close_chunk()
-            storage.bio.flush()
-            os.fsync(storage.bio.fileno())
+            try:
+                storage.close_chunk()
+                storage.bio.flush()
+                os.fsync(storage.bio.fileno())
+            except OSError as error:
+                self._close_at_last_flush(error, unwritten=0)
             self._unflushed = False
+            self._flushed_counts = dict(self.counts)
+            self._flushed = _Flushed(storage.bio.tell(), len(storage.chunks), dict(self._writer.counts),
+                                     (self._writer.min_timestamp, self._writer.max_timestamp),
+                                     dict(storage.channel_stats),
+                                     (storage.message_start_time, storage.message_end_time))
 
     def close(self) -> None:
         with self._lock:
+            if self._stopped:
+                return
+            self._reserve.unlink(missing_ok=True)
             self._writer.close()
+
+    def _close_at_last_flush(self, error: OSError, unwritten: int) -> None:
+        """Cut the bag back to its last flush, close it there, and raise ``RecordingStopped``."""
+        writer, storage, flushed = self._writer, self._writer.storage, self._flushed
+        if flushed is None:  # the flush at open: no bag yet to keep
+            raise OSError(error.errno, f"cannot write {storage.path}: {error.strerror or error}") from error
+        # The buffered file may hold bytes it failed to write: drop it unflushed, reopen at the cut.
+        os.ftruncate(storage.bio.fileno(), flushed.offset)
+        os.close(storage.bio.fileno())
+        try:
+            storage.bio.close()
+        except OSError:
+            pass  # its buffer, which the cut dropped, and the descriptor closed above
+        self._reserve.unlink(missing_ok=True)
+        storage.bio = storage.path.open("r+b")
+        storage.bio.seek(flushed.offset)
+        del storage.chunks[flushed.chunks:]
+        storage.chunk = type(storage.chunk)(2**63 - 1, 0, BytesIO(), defaultdict(list))
+        storage.channel_stats = dict(flushed.mcap_stats)
+        storage.message_start_time, storage.message_end_time = flushed.mcap_times
+        writer.counts = dict(flushed.counts)
+        writer.min_timestamp, writer.max_timestamp = flushed.timestamps
+        lost = sum(self.counts.values()) - sum(self._flushed_counts.values()) + unwritten
+        self.counts = dict(self._flushed_counts)
+        self._stopped = RecordingStopped(storage.path, error, sum(self.counts.values()), lost)
+        try:
+            writer.close()
+        except OSError as close_error:
+            storage.abort()
+            raise OSError(close_error.errno, f"{self._stopped}; closing failed too ({close_error.strerror}): "
+                                             f"`glocal-ros bag repair {self.path}` recovers the flushed chunks") \
+                from error
+        raise self._stopped from error
 
 
 @contextmanager

@@ -10,6 +10,10 @@ with every gap when the bag closes (``glocal-ros bag check`` does the same
 on a bag afterwards). A recorder that was killed leaves a bag without
 metadata.yaml: ``glocal-ros bag repair`` recovers it, up to the last flush:
 every ``flush_interval_sec`` the pending chunk is closed and synced to disk.
+
+A bag that cannot be written (a full disk) is closed at its last flush,
+whole and readable (``BagWriter``); the node logs why and what was lost,
+and exits with code 1: a recording with a hole is not a recording.
 """
 
 from __future__ import annotations
@@ -23,7 +27,7 @@ from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPo
 from rclpy.serialization import deserialize_message
 
 from glocal_ros.recording import (
-    EPISODES_TOPIC, GRAPH_TOPICS, BagWriter, SequenceTracker, TopicSpec, episode_seq_from_cdr,
+    EPISODES_TOPIC, GRAPH_TOPICS, BagWriter, RecordingStopped, SequenceTracker, TopicSpec, episode_seq_from_cdr,
 )
 from node_common.params import declare
 from node_common.runner import spin_node
@@ -51,7 +55,8 @@ class RecorderNode(Node):
         flush_interval = declare(self, "flush_interval_sec", 2.0, "seconds between chunk flushes to disk: "
                                  "the most a killed recorder loses", min_value=0.1, max_value=86_400.0)
         self.writer = BagWriter(Path(output))
-        self.create_timer(flush_interval, self.writer.flush)
+        self.exit_code = 0
+        self.create_timer(flush_interval, self._flush)
         self.episode_seqs = SequenceTracker()
         for spec in GRAPH_TOPICS:
             self.create_subscription(
@@ -59,9 +64,26 @@ class RecorderNode(Node):
             )
         self.get_logger().info(f"recording {len(GRAPH_TOPICS)} topics into {output}")
 
+    def _flush(self) -> None:
+        try:
+            self.writer.flush()
+        except RecordingStopped as stopped:
+            self._stop(stopped)
+
+    def _stop(self, stopped: RecordingStopped) -> None:
+        """The bag is closed (see ``BagWriter``): say so once, and end the node."""
+        if self.exit_code:
+            return
+        self.exit_code = 1
+        self.get_logger().error(f"recording stopped: {stopped}")
+        self.context.try_shutdown()
+
     def _writer_for(self, topic: str):
         def write(data: bytes) -> None:
-            self.writer.write(topic, self.get_clock().now().nanoseconds, data)
+            try:
+                self.writer.write(topic, self.get_clock().now().nanoseconds, data)
+            except RecordingStopped as stopped:
+                self._stop(stopped)
 
         if topic != EPISODES_TOPIC:
             return write

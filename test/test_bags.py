@@ -1,6 +1,8 @@
 """Recorded bags: episode seq checks, repair of a killed recorder's bag, replay."""
 
 import io
+import json
+import os
 import signal
 import subprocess
 import sys
@@ -162,6 +164,95 @@ def test_repair_recovers_what_a_killed_recorder_wrote(start_node, ros_node, tmp_
     assert result.returncode == 0 and "intact" in result.stdout, result.stdout + result.stderr
     assert (bag / "metadata.yaml").read_text() == metadata and not (tmp_path / "bag.damaged.2").exists()
     assert run_cli("bag", "check", bag).returncode == 0
+
+
+# Writes episodes through a BagWriter in a process whose files may not grow past a limit, as a
+# full disk stops them (EFBIG there, ENOSPC on a disk); prints what the writer reported.
+_WRITE_UNTIL_FULL = """
+import json, resource, signal, sys
+import numpy as np
+from rclpy.serialization import serialize_message
+from test_bags import episode
+from glocal_ros.recording import BagWriter, RecordingStopped
+limit = int(sys.argv[2])
+signal.signal(signal.SIGXFSZ, signal.SIG_IGN)
+resource.setrlimit(resource.RLIMIT_FSIZE, (limit, limit))
+writer = BagWriter(sys.argv[1])
+written = 0
+try:
+    for seq in range(10_000):
+        writer.write("/glocal/episodes", 10**18 + seq, serialize_message(episode(seq, values=20_000)))
+        written += 1
+        if seq % 10 == 9:
+            writer.flush()
+except RecordingStopped as stopped:
+    print(json.dumps({"written": written, "kept": stopped.kept, "lost": stopped.lost, "error": str(stopped)}))
+writer.close()
+"""
+
+
+def test_a_bag_that_cannot_grow_is_closed_whole_at_its_last_flush(tmp_path):
+    bag = tmp_path / "bag"
+    limit = BagWriter.RESERVE_BYTES + 2_000_000  # per file: the reserve fits, the MCAP file fills up
+    result = subprocess.run([sys.executable, "-c", _WRITE_UNTIL_FULL, str(bag), str(limit)], capture_output=True,
+                            text=True, timeout=300, cwd=REPO, env={**os.environ, "PYTHONPATH": str(REPO / "test")})
+    assert result.returncode == 0, result.stderr
+    report = json.loads(result.stdout)
+    assert "bag.mcap" in report["error"] and "File too large" in report["error"], report
+    assert report["kept"] % 10 == 0 and 0 < report["lost"] <= 10, report  # flushed every 10 episodes
+    # Every episode is kept or counted lost; the failing write, if a write failed rather than a flush.
+    assert report["written"] <= report["kept"] + report["lost"] <= report["written"] + 1, report
+    assert not (bag / ".space-reserve").exists()
+    check = episode_sequence(bag)  # a closed bag: metadata.yaml and a summary, no repair needed
+    assert (check.count, check.first, check.last) == (report["kept"], 0, report["kept"] - 1) and check.ok
+    assert run_cli("bag", "check", bag).returncode == 0
+
+
+def _small_disk_available() -> bool:
+    """Whether this user may mount a tmpfs in a user namespace of its own (the disk that fills up)."""
+    try:
+        return subprocess.run(["unshare", "-rm", "true"], capture_output=True, timeout=30).returncode == 0
+    except (OSError, subprocess.TimeoutExpired):
+        return False
+
+
+@pytest.mark.skipif(not _small_disk_available(), reason="needs `unshare -rm` to mount a small tmpfs")
+def test_a_recorder_on_a_full_disk_closes_its_bag_and_says_why(ros_node, tmp_path):
+    """Before, the recorder died with FATAL on ENOSPC and left a bag nothing could read."""
+    disk = tmp_path / "disk"
+    disk.mkdir()
+    # The recorder runs in a namespace where ``disk`` is a 10 MB tmpfs (8 MiB of it the bag's reserve);
+    # the bag is copied out before the namespace, and the tmpfs with it, goes away. UDP only: Fast
+    # DDS's shared memory does not cross the user namespace.
+    script = 'mount -t tmpfs -o size=10m tmpfs "$0" && "$@"; code=$?; cp -r "$0/bag" "$0.out"; exit $code'
+    log = tmp_path / "recorder.log"
+    with open(log, "w") as out:
+        recorder = subprocess.Popen(
+            ["unshare", "-rm", "sh", "-c", script, str(disk), *GLOCAL_ROS, "run", "recorder_node", "--ros-args",
+             "-p", f"output:={disk / 'bag'}", "-p", "flush_interval_sec:=0.5"],
+            stdout=out, stderr=subprocess.STDOUT, cwd=REPO, env={**os.environ, "FASTDDS_BUILTIN_TRANSPORTS": "UDPv4"})
+    try:
+        publisher = ros_node.create_publisher(EpisodeRecord, names.EPISODES, qos.EPISODES)
+        wait_until(lambda: publisher.get_subscription_count() or recorder.poll() is not None, 60,
+                   "the recorder's subscription")
+        assert recorder.poll() is None, log.read_text()
+        for seq in range(200):  # 80 kB episodes, paced so that flushes come between them: 2 MB fill the disk
+            publisher.publish(episode(seq, values=20_000))
+            assert publisher.wait_for_all_acked(Duration(seconds=30))
+            if recorder.poll() is not None:
+                break
+            time.sleep(0.1)
+        assert recorder.wait(60) == 1, log.read_text()
+    finally:
+        if recorder.poll() is None:
+            recorder.kill()
+            recorder.wait()
+    text = log.read_text()
+    assert "recording stopped: cannot write" in text and "No space left on device" in text, text
+    assert "FATAL" not in text, text
+    check = episode_sequence(tmp_path / "disk.out")  # closed: no repair needed
+    assert check.count > 0 and check.first == 0 and check.ok, check.summary()
+    assert f"with {check.count} messages" in text, text
 
 
 def received(ros_node, message_type, topic, profile):
