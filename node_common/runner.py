@@ -5,6 +5,7 @@ from __future__ import annotations
 import os
 import threading
 from contextlib import contextmanager
+from pathlib import Path
 from typing import Callable, Iterator, Sequence
 
 import rclpy
@@ -12,15 +13,32 @@ from rclpy.executors import ExternalShutdownException, MultiThreadedExecutor, Si
 from rclpy.node import Node
 from rclpy.signals import SignalHandlerOptions
 
+from glocal_ros.paths import assets_dir
+
 #: The graph stays on this host unless the user opts in, e.g. with
 #: ``export ROS_AUTOMATIC_DISCOVERY_RANGE=SUBNET`` (see README, "Networking").
 DEFAULT_DISCOVERY_RANGE = "LOCALHOST"
+#: Fast DDS 2.x (Jazzy) reads its XML profiles from this variable (3.x also reads FASTDDS_...).
+PROFILES_FILE_VARIABLE = "FASTRTPS_DEFAULT_PROFILES_FILE"
 SHUTDOWN_POLL_SEC = 0.25
 
 
+def loopback_profile() -> Path:
+    """The Fast DDS profile that binds every UDP socket the node receives on to 127.0.0.1."""
+    return assets_dir() / "fastdds" / "loopback.xml"
+
+
 def configure_discovery() -> None:
-    """Keep discovery on loopback unless the environment already says otherwise."""
+    """Keep discovery, and the sockets Fast DDS listens on, on loopback unless the environment says otherwise.
+
+    The discovery range limits whom a node finds, not where it listens: on
+    LOCALHOST, Fast DDS still binds its ports to 0.0.0.0 unless a profile says
+    otherwise, so the loopback profile comes with it. A profiles file of the
+    user's own is left as it is (and is then theirs to bind).
+    """
     os.environ.setdefault("ROS_AUTOMATIC_DISCOVERY_RANGE", DEFAULT_DISCOVERY_RANGE)
+    if os.environ["ROS_AUTOMATIC_DISCOVERY_RANGE"] == "LOCALHOST":
+        os.environ.setdefault(PROFILES_FILE_VARIABLE, str(loopback_profile()))
 
 
 def spin_node(make_node: Callable[[], Node], args: Sequence[str] | None = None, num_threads: int = 1) -> int:

@@ -18,12 +18,14 @@ import pytest
 
 from glocal_ros.domain import reserve_domain_id
 from glocal_ros.processes import NodeProcess
+from node_common.runner import configure_discovery
 
 REPO = Path(__file__).resolve().parent.parent
 
 _DOMAIN_ID, _DOMAIN_LOCK = reserve_domain_id()
 os.environ["ROS_DOMAIN_ID"] = str(_DOMAIN_ID)
 os.environ["ROS_AUTOMATIC_DISCOVERY_RANGE"] = "LOCALHOST"
+configure_discovery()  # the loopback profile, for the suite's own participants as for the nodes'
 os.environ["ROS_LOG_DIR"] = tempfile.mkdtemp(prefix="glocal-ros-log-")
 # Nodes keep policies and curriculum journals under ROS_HOME by default: never the user's.
 os.environ["ROS_HOME"] = tempfile.mkdtemp(prefix="glocal-ros-home-")

@@ -1,13 +1,20 @@
 """The whole graph as processes: curriculum -> learner -> sim and back, recorded."""
 
+import os
+import shutil
 import signal
+import subprocess
+from pathlib import Path
 
+import pytest
 from glocal_interfaces.msg import CurriculumState, EpisodeRecord, TaskAssignment
 from rosbags.highlevel import AnyReader
 
-from conftest import wait_until
+from conftest import REPO, wait_until
+from glocal_ros.processes import NodeProcess
 from glocal_ros.recording import graph_typestore
 from node_common import names, qos
+from node_common.runner import PROFILES_FILE_VARIABLE
 
 TASKS = ["A0", "B2", "D4", "G6"]
 EVAL_EPISODES = 2
@@ -64,3 +71,58 @@ def test_curriculum_decision_travels_through_learner_and_sim(start_node, ros_nod
     assert [e.seq for e in by_topic["/glocal/episodes"]] == [e.seq for e in episodes]
     assert by_topic["/glocal/curriculum_state"][-1].status == CurriculumState.STATUS_FINISHED
     assert by_topic["/glocal/evaluations"][0].policy == "prior"
+
+
+def udp_sockets(pid: int) -> list[tuple[str, int]]:
+    """(address, port) of every UDP socket the process holds, from ``ss``."""
+    lines = subprocess.run(["ss", "-uanpH"], capture_output=True, text=True, check=True).stdout.splitlines()
+    sockets = []
+    for line in lines:
+        if f"pid={pid}," in line:
+            address, _, port = line.split()[3].rpartition(":")
+            sockets.append((address.strip("[]"), int(port)))
+    return sockets
+
+
+def ephemeral_ports() -> range:
+    low, high = map(int, Path("/proc/sys/net/ipv4/ip_local_port_range").read_text().split())
+    return range(low, high + 1)
+
+
+def rtps_unicast_ports(domain_id: int) -> range:
+    """The RTPS well-known unicast ports of a domain (port base 7400, domain gain 250; +10, +11 per participant)."""
+    first = 7400 + 250 * domain_id + 10
+    return range(first, first + 250 - 10)
+
+
+def without_profile() -> dict[str, str]:
+    """This environment without the loopback profile the suite loads (see conftest)."""
+    return {key: value for key, value in os.environ.items() if key != PROFILES_FILE_VARIABLE}
+
+
+@pytest.mark.skipif(shutil.which("ss") is None, reason="needs ss (iproute2)")
+def test_nodes_listen_on_loopback_unless_the_user_opts_in(tmp_path):
+    """Before, discovery was LOCALHOST but Fast DDS bound its ports to 0.0.0.0 and the host's address."""
+    domain_id = int(os.environ["ROS_DOMAIN_ID"])
+    ours = NodeProcess("recorder_node", tmp_path, {"output": str(tmp_path / "bag")}, cwd=REPO)
+    subnet = NodeProcess("recorder_node", tmp_path, {"output": str(tmp_path / "bag-subnet")}, cwd=REPO,
+                         env={**without_profile(), "ROS_AUTOMATIC_DISCOVERY_RANGE": "SUBNET"})
+    try:
+        for process in (ours, subnet):
+            wait_until(lambda: "recording" in process.log(), 60, "the recorder to start", processes=[process])
+
+        def well_known(process: NodeProcess) -> list[tuple[str, int]]:
+            return [s for s in udp_sockets(process.process.pid) if s[1] in rtps_unicast_ports(domain_id)]
+
+        wait_until(lambda: len(well_known(ours)) >= 2 and len(well_known(subnet)) >= 2, 60,
+                   "the nodes' discovery and data ports", processes=[ours, subnet])
+        sockets = udp_sockets(ours.process.pid)
+        # Every port a peer could be told about (discovery, data, anything not ephemeral) is on loopback.
+        # rmw_fastrtps's LOCALHOST mode adds a send-only UDP transport of its own: its output sockets
+        # have ephemeral ports on the wildcard and host addresses, and nothing reads them.
+        assert all(address == "127.0.0.1" for address, port in sockets if port not in ephemeral_ports()), sockets
+        assert all(address == "127.0.0.1" for address, _ in well_known(ours)), sockets
+        # The documented opt-in (SUBNET) drops the loopback profile: reachable from other hosts.
+        assert any(address == "0.0.0.0" for address, _ in well_known(subnet)), udp_sockets(subnet.process.pid)
+    finally:
+        assert ours.stop() == 0 and subnet.stop() == 0
