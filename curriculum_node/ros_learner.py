@@ -17,6 +17,9 @@ same goal again:
   with STATUS_UNKNOWN (it never had the goal), and the goal is sent again,
   resuming from its last checkpoint; a learner that does not come back
   within ``timeout_sec`` fails the call.
+Evaluate and CopyPolicy are sent again when the learner that had them leaves
+the graph (``node_common.calls.ServerWatch``): a seeded evaluation asked
+again scores the same, and a copy made before the kill is found there.
 The race that drops responses inside rclpy is closed by
 ``node_common.action_client``.
 """
@@ -36,7 +39,7 @@ from rclpy.node import Node
 from glocal_ros.curriculum.learner import EpisodeSummary, TrainRequest, TrainResult
 from node_common import names
 from node_common.action_client import ActionClient
-from node_common.calls import ServiceCallError, call_checked, wait_for_service
+from node_common.calls import ServerGone, ServerWatch, ServiceCallError, call_checked, wait_for_service
 
 #: How long to wait before offering a goal again that the learner rejected
 #: because it is busy (with a goal this node sent before it was restarted).
@@ -69,6 +72,7 @@ class RosLearner:
         # What the recovery below had to do (``glocal-ros bench graph`` reports them).
         self.goals_sent_again = 0  # a goal response lost, or the learner left mid-goal
         self.results_asked_again = 0  # the goal ended, its result response did not come
+        self.calls_sent_again = 0  # an Evaluate or CopyPolicy whose learner left before answering
 
     def wait_for_learner(self) -> None:
         wait_for_service(self._evaluate, self.timeout_sec)
@@ -76,14 +80,15 @@ class RosLearner:
         if not self._train.wait_for_server(timeout_sec=self.timeout_sec):
             raise ServiceCallError(f"action {names.LEARNER_TRAIN} is not available after {self.timeout_sec:.0f} s")
 
-    def evaluate(self, policy: str, tasks: Sequence[str], episodes: int) -> dict[str, float]:
-        request = Evaluate.Request(policy=policy, tasks=list(tasks), episodes=episodes, seed=-1)
-        response = call_checked(self._evaluate, request, timeout_sec=self.timeout_sec)
+    def evaluate(self, policy: str, tasks: Sequence[str], episodes: int, seed: int | None = None) -> dict[str, float]:
+        request = Evaluate.Request(policy=policy, tasks=list(tasks), episodes=episodes,
+                                   seed=-1 if seed is None else seed)
+        response = self._call(self._evaluate, request)
         return {score.task: float(score.successes) for score in response.scores}
 
     def copy(self, source: str, destination: str) -> None:
         try:
-            call_checked(self._copy, CopyPolicy.Request(source=source, destination=destination), self.timeout_sec)
+            self._call(self._copy, CopyPolicy.Request(source=source, destination=destination))
         except ServiceCallError as error:
             # Copied just before this node was killed, before the journal had it.
             if "exists already" not in str(error):
@@ -96,6 +101,7 @@ class RosLearner:
             output_policy=request.output_policy, step_budget=request.step_budget, threshold=request.threshold,
             eval_episodes=request.eval_episodes, eval_interval=request.eval_interval,
             stop_when_learned=request.stop_when_learned, keep_replay_buffer=request.keep_replay_buffer,
+            seed=-1 if request.seed is None else request.seed,
         )
         while True:
             response = self._wait_result(self._send(goal))
@@ -113,6 +119,17 @@ class RosLearner:
         if status == GoalStatus.STATUS_CANCELED or not self.node.context.ok():
             raise LearnerStopped(f"training {request.output_policy} stopped: {result.message}")
         raise ServiceCallError(f"training {request.output_policy} failed: {result.message}")
+
+    def _call(self, client, request):
+        """``call_checked``, asked again of a learner that was restarted before it answered."""
+        while True:
+            try:
+                return call_checked(client, request, self.timeout_sec, ServerWatch(self.node, client.srv_name))
+            except ServerGone:
+                self.calls_sent_again += 1
+                self.node.get_logger().warning(f"the learner left before answering {client.srv_name}: "
+                                               "asking again when it is back")
+                wait_for_service(client, self.timeout_sec)
 
     def _send(self, goal: Train.Goal):
         """The handle of ``goal`` once the learner accepted it."""

@@ -121,10 +121,11 @@ class LearnerNode(Node):
             raise ValueError(f"tasks repeat: {list(tasks)}")
         if episodes > self.max_eval_episodes:
             raise ValueError(f"episodes {episodes} above max_eval_episodes {self.max_eval_episodes}")
-        policy = self.policies.load(request.policy)
+        seed = None if request.seed < 0 else request.seed
+        policy = self.policies.load(request.policy, seed)
         scores = self.run_on_sim(lambda: evaluate(
-            self.sim, policy, tasks, episodes, policy_name=request.policy,
-            seed=None if request.seed < 0 else request.seed, global_step=self.trainer.total_steps,
+            self.sim, policy, tasks, episodes, policy_name=request.policy, seed=seed,
+            global_step=self.trainer.total_steps,
         ))
         response.scores = [TaskScore(task=s.task, successes=s.successes, episodes=s.episodes) for s in scores]
         response.success = True
@@ -188,7 +189,7 @@ class LearnerNode(Node):
                 output_policy=goal.output_policy, step_budget=goal.step_budget,
                 threshold=goal.threshold or DEFAULT_THRESHOLD_FRACTION * eval_episodes, eval_episodes=eval_episodes,
                 eval_interval=goal.eval_interval, stop_when_learned=goal.stop_when_learned,
-                keep_replay_buffer=goal.keep_replay_buffer,
+                keep_replay_buffer=goal.keep_replay_buffer, seed=None if goal.seed < 0 else goal.seed,
             )
             spec.check(self.max_eval_episodes, self.max_step_budget)
             self.policies.record(spec.initial_policy)  # an unknown policy fails here, not mid-goal

@@ -42,9 +42,11 @@ class PolicyRegistry:
             return PolicyRecord(name=RANDOM_POLICY)
         return self._store_of(name).record(name)
 
-    def load(self, name: str) -> BatchPolicy:
+    def load(self, name: str, seed: int | None = None) -> BatchPolicy:
+        """``name`` as a batch policy; ``seed`` seeds the random policy's actions (else the registry's stream)."""
         if name == RANDOM_POLICY:
-            return lambda observations: self._rng.uniform(
+            rng = self._rng if seed is None else np.random.default_rng(seed)
+            return lambda observations: rng.uniform(
                 -1.0, 1.0, size=(len(observations), ACTION_DIM)
             ).astype(np.float32)
         model = self.model(name)

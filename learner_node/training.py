@@ -42,6 +42,7 @@ from typing import Callable
 
 import numpy as np
 
+from glocal_ros.seeds import MAX_SEED, derived_seed
 from glocal_ros.tasks import validate_tasks
 from learner_node.evaluation import BatchStepper, Score, evaluate
 from learner_node.policies import RANDOM_POLICY, PolicyRegistry
@@ -59,6 +60,8 @@ DEFAULT_EVAL_EPISODES = 100
 #: (or 2^64 - 1), and would train until cancelled.
 DEFAULT_MAX_STEP_BUDGET = 100_000_000
 CHECKPOINT_FILE = "checkpoint.json"
+#: Keys of a seeded goal's streams (``glocal_ros.seeds.derived_seed``): training, and each evaluation.
+TRAINING_STREAM, EVALUATION_STREAM = 0, 1
 FINISHED_FILE = "finished.json"
 
 
@@ -76,6 +79,7 @@ class TrainSpec:
     eval_interval: int = 0
     stop_when_learned: bool = False
     keep_replay_buffer: bool = False
+    seed: int | None = None  # None: the trainer's own streams (see ``Trainer._seeded``)
 
     def check(self, max_eval_episodes: int = 1_000_000, max_step_budget: int = DEFAULT_MAX_STEP_BUDGET) -> None:
         """Raise ``ValueError`` with a message a user can act on."""
@@ -97,6 +101,8 @@ class TrainSpec:
             raise ValueError(f"eval_episodes {self.eval_episodes} outside 1..{max_eval_episodes}")
         if self.eval_interval < 0:
             raise ValueError(f"eval_interval must not be negative, got {self.eval_interval}")
+        if self.seed is not None and not 0 <= self.seed <= MAX_SEED:
+            raise ValueError(f"seed {self.seed} outside 0..{MAX_SEED} (-1 for none)")
 
 
 class GoalFailed(RuntimeError):
@@ -196,6 +202,7 @@ class Trainer:
                               policy_name=spec.output_policy, global_step=lambda: self.total_steps,
                               between_steps=between)
         model, resumed = self._model(spec, vec_env, checkpoint_dir, state)
+        self._seeded(spec, model, resumed)
         for key in SCHEDULE_KEYS:
             setattr(model, key, SAC_KWARGS[key])
         updates = OverlappedUpdates(model)
@@ -307,16 +314,44 @@ class Trainer:
             model.set_env(vec_env, force_reset=True)
             return model, 0
         model = SAC.load(store_path, env=vec_env, device="cpu")
-        model.set_random_seed(self.seed)
         # An empty buffer: update once a batch of this goal's transitions is in.
         model.learning_starts = model.num_timesteps + SAC_KWARGS["batch_size"]
         return model, 0
 
+    def _seeded(self, spec: TrainSpec, model, resumed: int) -> None:
+        """Seed the goal's random streams: SAC's sampling and, for a seeded goal, its sim episodes.
+
+        A goal with a seed is a function of its initial policy, its spec and
+        its seed, whatever ran on the learner and the sim before it: every
+        stream it draws from starts from a seed derived from it (torch, numpy
+        and the action space through SB3's ``set_random_seed``, env k's
+        episodes from that seed + k at the first reset; each evaluation's
+        episodes from a seed of their own, see ``_evaluate_task``). Two
+        exceptions: a goal resumed from a checkpoint at step s draws from
+        seeds derived from s, so it is repeatable from the checkpoint but is
+        not the goal it would have been uninterrupted (the sim's episodes in
+        flight and SAC's generator states are not in the checkpoint); and a
+        warm model (``keep_replay_buffer``) brings the previous goal's buffer,
+        which a restarted learner no longer has. Without a seed, a new model is
+        seeded with the trainer's seed and the sim's episodes continue its own
+        streams; a warm or resumed model continues its streams.
+        """
+        from stable_baselines3.common.utils import set_random_seed
+
+        if spec.seed is None:
+            if not (resumed or self._warm and self._warm[2] is model):
+                set_random_seed(self.seed)  # what model.set_random_seed does, less the envs' seeds
+                model.action_space.seed(self.seed)
+            return
+        model.set_random_seed(derived_seed(spec.seed, TRAINING_STREAM, resumed))  # the vec env's next reset too
+
     def _evaluate_task(self, model, spec: TrainSpec, state: _GoalState, steps: int,
                        on_evaluation: Callable[[Score], None]) -> None:
         """Score ``model`` on the goal's task as the policy after ``steps`` of the goal's training steps."""
+        seed = None if spec.seed is None else derived_seed(spec.seed, EVALUATION_STREAM, steps)
         (score,) = evaluate(self.envs, lambda obs: model.predict(obs, deterministic=True)[0], [spec.task],
-                            spec.eval_episodes, policy_name=spec.output_policy, global_step=self.total_steps)
+                            spec.eval_episodes, policy_name=spec.output_policy, seed=seed,
+                            global_step=self.total_steps)
         state.score = asdict(score)
         state.learned = score.successes > spec.threshold
         state.steps_at_last_eval = steps

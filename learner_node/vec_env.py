@@ -95,7 +95,10 @@ class BatchVecEnv(VecEnv):
 
     def reset(self) -> np.ndarray:
         self._running = [next(self.tasks) for _ in range(self.num_envs)]
-        observations, _ = self.envs.reset((), self._running, (), PHASE_TRAIN, self.policy_name)
+        # SB3's ``seed(s)`` asks for env k's next episode to get s + k: the batch's base seed.
+        seeds = [self._seeds[0]] if self._seeds and self._seeds[0] is not None else []
+        self._reset_seeds()
+        observations, _ = self.envs.reset((), self._running, seeds, PHASE_TRAIN, self.policy_name)
         self._reserved = [next(self.tasks) for _ in range(self.num_envs)]
         self._returns[:] = 0.0
         self._lengths[:] = 0

@@ -39,13 +39,15 @@ class SimulatedLearner:
         self.policies: dict[str, np.ndarray] = {"prior": prior}
         self.calls: list[tuple[str, object]] = []
 
-    def evaluate(self, policy: str, tasks, episodes: int) -> dict[str, float]:
+    def evaluate(self, policy: str, tasks, episodes: int, seed: int | None = None) -> dict[str, float]:
         self.calls.append(("evaluate", (policy, tuple(tasks))))
         competence = self._policy(policy)
-        return {t: float(self._rng.binomial(episodes, competence[task_index(t)])) for t in tasks}
+        rng = self._rng if seed is None else np.random.default_rng(seed)
+        return {t: float(rng.binomial(episodes, competence[task_index(t)])) for t in tasks}
 
     def train(self, request: TrainRequest) -> TrainResult:
         self.calls.append(("train", request))
+        rng = self._rng if request.seed is None else np.random.default_rng(request.seed)
         if request.step_budget < 1:
             raise ValueError(f"step_budget must be at least 1, got {request.step_budget}")
         competence = self._policy(request.initial_policy).copy()
@@ -53,16 +55,16 @@ class SimulatedLearner:
         chunk = request.eval_interval or request.step_budget
         steps, score, learned, episodes = 0, -1.0, False, []
         if request.task and request.stop_when_learned:  # "until S > B" checks first, as the learner does
-            score = float(self._rng.binomial(request.eval_episodes, competence[task_index(request.task)]))
+            score = float(rng.binomial(request.eval_episodes, competence[task_index(request.task)]))
             learned = score > request.threshold
         while steps < request.step_budget and not (learned and request.stop_when_learned):
             chunk_steps = min(chunk, request.step_budget - steps)
             for task in tasks:
                 self._practise(competence, task, chunk_steps / len(tasks))
-            episodes += self._episodes(competence, tasks, chunk_steps)
+            episodes += self._episodes(competence, tasks, chunk_steps, rng)
             steps += chunk_steps
             if request.task:
-                score = float(self._rng.binomial(request.eval_episodes, competence[task_index(request.task)]))
+                score = float(rng.binomial(request.eval_episodes, competence[task_index(request.task)]))
                 learned = score > request.threshold
         self.policies[request.output_policy] = competence
         return TrainResult(learned, score, steps, tuple(episodes))
@@ -87,13 +89,14 @@ class SimulatedLearner:
             j = task_index(other)
             competence[j] = min(1.0, competence[j] + share * gain * (1 - competence[j]))
 
-    def _episodes(self, competence: np.ndarray, tasks: list[str], steps: int) -> list[EpisodeSummary]:
+    def _episodes(self, competence: np.ndarray, tasks: list[str], steps: int,
+                  rng: np.random.Generator) -> list[EpisodeSummary]:
         episodes, used, turn = [], 0, 0
         while used < steps:
             task = tasks[turn % len(tasks)]
             turn += 1
-            success = bool(self._rng.random() < competence[task_index(task)])
-            length = min(int(self._rng.integers(15, 30)) if success else self.max_episode_steps, steps - used)
+            success = bool(rng.random() < competence[task_index(task)])
+            length = min(int(rng.integers(15, 30)) if success else self.max_episode_steps, steps - used)
             used += length
             episodes.append(EpisodeSummary(task, -float(length), length, success))
         return episodes

@@ -9,17 +9,25 @@ each must match what was journaled; after the last one the run goes on live.
 So every strategy resumes exactly where it stopped, with no per-strategy
 save code, and the call in flight at the kill is simply asked again (the
 learner resumes a re-sent Train goal from its checkpoint).
+
+Given a run seed, the n-th call (evaluate or train) carries the seed
+``derived_seed(seed, n)``: its episodes and SAC's sampling are then a
+function of the run seed, the call and the policies it reads, not of what
+the learner and the sim did before. So a run resumed after a kill, with its
+nodes restarted or not, asks and hears the same as the uninterrupted run
+from the kill on, down to every episode (limits: ``Trainer._seeded``).
 """
 
 from __future__ import annotations
 
 import json
 import os
-from dataclasses import asdict
+from dataclasses import asdict, replace
 from pathlib import Path
 from typing import Any, Callable, Sequence
 
 from glocal_ros.curriculum.learner import EpisodeSummary, Learner, TrainRequest, TrainResult
+from glocal_ros.seeds import derived_seed
 
 
 class JournalMismatch(RuntimeError):
@@ -27,11 +35,17 @@ class JournalMismatch(RuntimeError):
 
 
 class JournaledLearner:
-    """A ``Learner`` whose answers are journaled to ``path`` and replayed from it."""
+    """A ``Learner`` whose answers are journaled to ``path`` and replayed from it.
 
-    def __init__(self, learner: Learner, path: Path, config: dict[str, Any]):
+    With a ``seed``, every evaluate and train call gets a seed of its own (see
+    the module doc); a call's own seed, when it has one, is kept.
+    """
+
+    def __init__(self, learner: Learner, path: Path, config: dict[str, Any], seed: int | None = None):
         self.learner = learner
         self.path = Path(path)
+        self.seed = seed
+        self._calls = 0  # calls of this run so far, replayed or live: the next call's index
         self._replay: list[dict] = []
         if self.path.is_file():
             lines = _read_entries(self.path)
@@ -51,18 +65,28 @@ class JournaledLearner:
         """True while answers still come from the journal."""
         return self.replayed < len(self._replay)
 
-    def evaluate(self, policy: str, tasks: Sequence[str], episodes: int) -> dict[str, float]:
-        return self._call("evaluate", {"policy": policy, "tasks": list(tasks), "episodes": episodes},
-                          lambda: self.learner.evaluate(policy, tasks, episodes), lambda answer: answer)
+    def evaluate(self, policy: str, tasks: Sequence[str], episodes: int, seed: int | None = None) -> dict[str, float]:
+        seed = self._call_seed() if seed is None else seed
+        arguments = {"policy": policy, "tasks": list(tasks), "episodes": episodes}
+        if seed is not None:
+            arguments["seed"] = seed
+        return self._call("evaluate", arguments, lambda: self.learner.evaluate(policy, tasks, episodes, seed),
+                          lambda answer: answer)
 
     def train(self, request: TrainRequest) -> TrainResult:
+        if request.seed is None:
+            request = replace(request, seed=self._call_seed())
         return self._call("train", asdict(request), lambda: self.learner.train(request), _train_result)
 
     def copy(self, source: str, destination: str) -> None:
         self._call("copy", {"source": source, "destination": destination},
                    lambda: self.learner.copy(source, destination), lambda answer: None)
 
+    def _call_seed(self) -> int | None:
+        return None if self.seed is None else derived_seed(self.seed, self._calls)
+
     def _call(self, name: str, arguments: dict, ask: Callable[[], Any], load: Callable[[Any], Any]):
+        self._calls += 1
         arguments = _plain(arguments)
         if self.replaying:
             entry = self._replay[self.replayed]

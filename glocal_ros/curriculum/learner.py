@@ -20,6 +20,7 @@ class TrainRequest:
     eval_interval: int = 0  # env steps between evaluations of ``task``; 0: at the end only
     stop_when_learned: bool = True
     keep_replay_buffer: bool = False
+    seed: int | None = None  # None: the learner's own random streams; else the goal is repeatable
 
 
 @dataclass(frozen=True)
@@ -39,8 +40,8 @@ class TrainResult:
 
 
 class Learner(Protocol):
-    def evaluate(self, policy: str, tasks: Sequence[str], episodes: int) -> dict[str, float]:
-        """Score ``policy`` on every task: successes out of ``episodes`` runs."""
+    def evaluate(self, policy: str, tasks: Sequence[str], episodes: int, seed: int | None = None) -> dict[str, float]:
+        """Score ``policy`` on every task: successes out of ``episodes`` runs (repeatable with a ``seed``)."""
 
     def train(self, request: TrainRequest) -> TrainResult:
         """Train as ``request`` says; blocks until the goal ends."""
