@@ -11,8 +11,12 @@ The loop is stable-baselines3's ``learn`` on a ``BatchVecEnv``; around it:
   learned means score > threshold (the paper's "above B"); a goal that
   stops when learned checks before its first step too, as "train until
   S > B" does, and stores the initial policy unchanged when it passes;
-- a checkpoint (model, replay buffer, progress) every ``checkpoint_interval``
-  steps, so that the same goal sent again after a crash continues from it;
+- a checkpoint (model, replay buffer, progress, the random generators'
+  states) every ``checkpoint_interval`` steps, so that the same goal sent
+  again after a crash continues from it; at a checkpoint every running
+  episode is cut and new ones start, from a seed derived from the step for a
+  seeded goal, so that a resumed goal goes on exactly as the uninterrupted
+  one (the sim's episodes in flight cannot be saved);
 - the trained model is written to the policy store only when the goal ends
   by itself (budget spent or learned), never half-way; the goal's outcome is
   kept, so the same goal sent again (its client restarted and lost the
@@ -32,6 +36,7 @@ Choices:
 
 from __future__ import annotations
 
+import base64
 import json
 import shutil
 import time
@@ -198,11 +203,11 @@ class Trainer:
                 used = True
             return used
 
-        vec_env = BatchVecEnv(self.envs, *self._spaces(spec), TaskCycle(spec.episode_tasks or (spec.task,)),
-                              policy_name=spec.output_policy, global_step=lambda: self.total_steps,
-                              between_steps=between)
-        model, resumed = self._model(spec, vec_env, checkpoint_dir, state)
-        self._seeded(spec, model, resumed)
+        cycle = TaskCycle(spec.episode_tasks or (spec.task,))
+        vec_env = BatchVecEnv(self.envs, *self._spaces(spec), cycle, policy_name=spec.output_policy,
+                              global_step=lambda: self.total_steps, between_steps=between)
+        model, resumed = self._model(spec, vec_env, checkpoint_dir, state, cycle)
+        self._seeded(spec, model, vec_env, resumed)
         for key in SCHEDULE_KEYS:
             setattr(model, key, SAC_KWARGS[key])
         updates = OverlappedUpdates(model)
@@ -217,6 +222,16 @@ class Trainer:
         trainer = self
 
         class GoalCallback(BaseCallback):
+            def _on_rollout_start(self) -> None:
+                # Before the vector step's actions are drawn: the last step's transition is in the
+                # buffer, so a checkpoint here holds everything the next step depends on.
+                steps = self.model.num_timesteps - goal_start_timesteps
+                if steps - last["checkpoint"] >= trainer.checkpoint_interval:
+                    last["checkpoint"] = steps
+                    with updates.settled():
+                        trainer._save_checkpoint(checkpoint_dir, spec, self.model, state, cycle)
+                    trainer._cut_episodes(spec, self.model, vec_env, steps)
+
             def _on_step(self) -> bool:
                 nonlocal stop_reason
                 steps = self.model.num_timesteps - goal_start_timesteps
@@ -233,10 +248,6 @@ class Trainer:
                                               float(np.mean(recent)) if recent else 0.0,
                                               state.score["successes"] if state.score else -1.0,
                                               (steps - resumed) / max(now - started, 1e-9)))
-                if steps - last["checkpoint"] >= trainer.checkpoint_interval:
-                    last["checkpoint"] = steps
-                    with updates.settled():
-                        trainer._save_checkpoint(checkpoint_dir, spec, self.model, state)
                 stop_reason = should_stop()
                 keep_going = not stop_reason and not (spec.stop_when_learned and state.learned)
                 if keep_going:  # SB3 skips the updates of the step that stops it
@@ -251,14 +262,14 @@ class Trainer:
             except BaseException as error:
                 # The sim went away, or the process is stopping: keep what was trained.
                 if state.steps_used > last["checkpoint"]:
-                    self._save_checkpoint(checkpoint_dir, spec, model, state)
+                    self._save_checkpoint(checkpoint_dir, spec, model, state, cycle)
                     last["checkpoint"] = state.steps_used
                 self._warm = None
                 if isinstance(error, Exception):
                     raise GoalFailed(error, state.steps_used, last["checkpoint"]) from error
                 raise
         if stop_reason:
-            self._save_checkpoint(checkpoint_dir, spec, model, state)
+            self._save_checkpoint(checkpoint_dir, spec, model, state, cycle)
             self._warm = None
             return self._outcome(state, False, f"stopped after {state.steps_used} steps: {stop_reason}")
         if spec.task and (state.score is None or state.steps_at_last_eval != state.steps_used):
@@ -297,7 +308,8 @@ class Trainer:
         model = self.policies.model(record.name)
         return model.observation_space, model.action_space
 
-    def _model(self, spec: TrainSpec, vec_env: BatchVecEnv, checkpoint_dir: Path, state: _GoalState):
+    def _model(self, spec: TrainSpec, vec_env: BatchVecEnv, checkpoint_dir: Path, state: _GoalState,
+               cycle: TaskCycle):
         """The model to train and the step it resumes from (0 for a new goal)."""
         from stable_baselines3 import SAC
 
@@ -307,6 +319,8 @@ class Trainer:
             if not load_replay_buffer(model.replay_buffer, checkpoint_dir / saved["buffer"]):
                 model.learning_starts = model.num_timesteps + SAC_KWARGS["batch_size"]
             state.__dict__.update(saved["state"])
+            restore_random_state(model, saved["random_state"])
+            cycle.position = saved["task_position"]
             return model, state.steps_used
         store_path = str(self.policies.model_path(spec.initial_policy))
         if spec.keep_replay_buffer and self._warm and self._warm[:2] == (spec.initial_policy, store_path):
@@ -318,7 +332,7 @@ class Trainer:
         model.learning_starts = model.num_timesteps + SAC_KWARGS["batch_size"]
         return model, 0
 
-    def _seeded(self, spec: TrainSpec, model, resumed: int) -> None:
+    def _seeded(self, spec: TrainSpec, model, vec_env: BatchVecEnv, resumed: int) -> None:
         """Seed the goal's random streams: SAC's sampling and, for a seeded goal, its sim episodes.
 
         A goal with a seed is a function of its initial policy, its spec and
@@ -326,24 +340,38 @@ class Trainer:
         stream it draws from starts from a seed derived from it (torch, numpy
         and the action space through SB3's ``set_random_seed``, env k's
         episodes from that seed + k at the first reset; each evaluation's
-        episodes from a seed of their own, see ``_evaluate_task``). Two
-        exceptions: a goal resumed from a checkpoint at step s draws from
-        seeds derived from s, so it is repeatable from the checkpoint but is
-        not the goal it would have been uninterrupted (the sim's episodes in
-        flight and SAC's generator states are not in the checkpoint); and a
-        warm model (``keep_replay_buffer``) brings the previous goal's buffer,
-        which a restarted learner no longer has. Without a seed, a new model is
-        seeded with the trainer's seed and the sim's episodes continue its own
-        streams; a warm or resumed model continues its streams.
+        episodes from a seed of their own, see ``_evaluate_task``). A goal
+        resumed from its checkpoint at step s goes on exactly as the goal that
+        was not interrupted: the checkpoint holds the generators' states, and
+        both start new episodes there from a seed derived from s (see
+        ``_cut_episodes``). The exception: a warm model (``keep_replay_buffer``)
+        brings the previous goal's buffer, which a restarted learner no longer
+        has. Without a seed, a new model is seeded with the trainer's seed and
+        the sim's episodes continue its own streams; a warm model continues its
+        streams.
         """
         from stable_baselines3.common.utils import set_random_seed
 
-        if spec.seed is None:
-            if not (resumed or self._warm and self._warm[2] is model):
-                set_random_seed(self.seed)  # what model.set_random_seed does, less the envs' seeds
-                model.action_space.seed(self.seed)
-            return
-        model.set_random_seed(derived_seed(spec.seed, TRAINING_STREAM, resumed))  # the vec env's next reset too
+        if resumed:  # the generators are the checkpoint's; the episodes start as the cut's did
+            if spec.seed is not None:
+                vec_env.seed(derived_seed(spec.seed, TRAINING_STREAM, resumed))
+        elif spec.seed is not None:
+            model.set_random_seed(derived_seed(spec.seed, TRAINING_STREAM, 0))  # the vec env's first reset too
+        elif not (self._warm and self._warm[2] is model):
+            set_random_seed(self.seed)  # what model.set_random_seed does, less the envs' seeds
+            model.action_space.seed(self.seed)
+
+    def _cut_episodes(self, spec: TrainSpec, model, vec_env: BatchVecEnv, steps: int) -> None:
+        """End every running episode and start new ones, as a goal resumed from a checkpoint here starts.
+
+        The cut episodes' last transitions are in the buffer as they were (not
+        done: SAC bootstraps from their next observation, as at a time limit);
+        the sim records the episodes as interrupted.
+        """
+        if spec.seed is not None:
+            vec_env.seed(derived_seed(spec.seed, TRAINING_STREAM, steps))
+        model._last_obs = vec_env.reset()
+        model._last_episode_starts = np.ones(vec_env.num_envs, dtype=bool)
 
     def _evaluate_task(self, model, spec: TrainSpec, state: _GoalState, steps: int,
                        on_evaluation: Callable[[Score], None]) -> None:
@@ -370,7 +398,7 @@ class Trainer:
         self._warm = (spec.output_policy, str(self.policies.store.root / stored.name / stored.model_file), model)
         return stored
 
-    def _save_checkpoint(self, folder: Path, spec: TrainSpec, model, state: _GoalState) -> None:
+    def _save_checkpoint(self, folder: Path, spec: TrainSpec, model, state: _GoalState, cycle: TaskCycle) -> None:
         """Model and buffer under new names, then the json naming them: a kill leaves the last whole one."""
         folder.mkdir(parents=True, exist_ok=True)
         previous = _read_checkpoint(folder)
@@ -379,7 +407,8 @@ class Trainer:
         atomic_write(folder / model_file, model.save)
         atomic_write(folder / buffer_file, lambda stream: save_replay_buffer(model.replay_buffer, stream))
         text = json.dumps({"version": version, "spec": _spec_key(spec), "model": model_file, "buffer": buffer_file,
-                           "state": asdict(state)}).encode()
+                           "state": asdict(state), "random_state": random_state(model),
+                           "task_position": cycle.position}).encode()
         atomic_write(folder / CHECKPOINT_FILE, lambda stream: stream.write(text))
         if previous:
             for name in (previous["model"], previous["buffer"]):
@@ -390,6 +419,28 @@ class Trainer:
         score = Score(**state.score) if state.score else None
         return TrainOutcome(state.learned, score, state.steps_used,
                             [FinishedEpisode(**e) for e in state.episodes], message, completed)
+
+
+def random_state(model) -> dict:
+    """Every generator a SAC goal draws from (SB3 seeds the same three): torch, numpy's global one
+    (replay buffer batches), the action space's (actions before learning starts)."""
+    import torch
+
+    keys, position, has_gauss, cached_gaussian = np.random.get_state()[1:]
+    return {"torch": base64.b64encode(torch.get_rng_state().numpy().tobytes()).decode(),
+            "numpy": {"keys": keys.tolist(), "position": position, "has_gauss": has_gauss,
+                      "cached_gaussian": cached_gaussian},
+            "action_space": model.action_space.np_random.bit_generator.state}
+
+
+def restore_random_state(model, saved: dict) -> None:
+    import torch
+
+    torch.set_rng_state(torch.from_numpy(np.frombuffer(base64.b64decode(saved["torch"]), dtype=np.uint8).copy()))
+    numpy = saved["numpy"]
+    np.random.set_state(("MT19937", np.array(numpy["keys"], dtype=np.uint32), numpy["position"],
+                         numpy["has_gauss"], numpy["cached_gaussian"]))
+    model.action_space.np_random.bit_generator.state = saved["action_space"]
 
 
 def _read_checkpoint(folder: Path) -> dict | None:

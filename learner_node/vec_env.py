@@ -48,11 +48,11 @@ class TaskCycle:
         if not tasks:
             raise ValueError("no training task")
         self._tasks = list(tasks)
-        self._next = 0
+        self.position = 0  # tasks drawn so far: a checkpoint keeps it
 
     def __next__(self) -> str:
-        task = self._tasks[self._next % len(self._tasks)]
-        self._next += 1
+        task = self._tasks[self.position % len(self._tasks)]
+        self.position += 1
         return task
 
     def __iter__(self):

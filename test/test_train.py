@@ -360,3 +360,54 @@ def test_a_policy_that_passes_already_is_stored_without_training(tmp_path):
         envs.close()
     assert outcome.learned and outcome.steps_used == 0 and outcome.score.successes > 0
     assert policies.record("a0").steps_trained == policies.record("prior").steps_trained
+
+
+def test_a_goal_resumed_from_its_checkpoint_ends_as_the_uninterrupted_goal(tmp_path):
+    """In-process (T = 10): the goal's checkpoint at step 290 (mid-episode) is copied aside while the goal runs on to
+    its end; another trainer (another store, seed and sim history) resumed from that copy ends the goal
+    with the same episodes, evaluations and weights, as a learner killed after the checkpoint would."""
+    import shutil
+
+    import torch
+
+    from glocal_ros.paths import assets_dir
+    from learner_node.evaluation import evaluate
+    from learner_node.policies import PolicyRegistry
+    from learner_node.policy_store import PolicyStore
+    from learner_node.training import CHECKPOINT_FILE, Trainer, TrainSpec
+    from sim_node.batch import BatchedEnvs
+    from sim_node.grasp_env import GraspEnv, GraspEnvConfig
+
+    spec = TrainSpec("A0", "prior", "goal", step_budget=600, eval_episodes=2, eval_interval=200, seed=11)
+    copy = tmp_path / "copy"
+
+    def run(name: str, trainer_seed: int, between_steps=lambda: False):
+        envs = BatchedEnvs(lambda i: GraspEnv("A0", config=GraspEnvConfig(max_steps=10)), 2, "A0")
+        policies = PolicyRegistry(PolicyStore(tmp_path / name / "store"), [PolicyStore(assets_dir() / "priors")])
+        trainer = Trainer(envs, policies, tmp_path / name / "checkpoints", seed=trainer_seed, checkpoint_interval=290)
+        try:
+            if name == "resumed":  # another history of the sim, and the checkpoint in place
+                evaluate(envs, policies.load("random", seed=3), ["B2"], 3)
+                shutil.copytree(copy, tmp_path / name / "checkpoints" / "goal")
+            outcome = trainer.train(spec, between_steps=between_steps)
+            return outcome, policies.model("goal")
+        finally:
+            envs.close()
+
+    checkpoint = tmp_path / "uninterrupted" / "checkpoints" / "goal" / CHECKPOINT_FILE
+
+    def copy_the_first_checkpoint() -> bool:
+        if checkpoint.is_file() and not copy.exists():
+            shutil.copytree(checkpoint.parent, copy)
+        return False
+
+    uninterrupted, model = run("uninterrupted", 0, copy_the_first_checkpoint)
+    assert json.loads((copy / CHECKPOINT_FILE).read_text())["state"]["steps_used"] == 290  # mid-episode
+    resumed, resumed_model = run("resumed", 5)
+    assert "resumed from a checkpoint at step 290" in resumed.message
+    assert model.num_timesteps > model.learning_starts + 200, "the gradient steps were not part of the test"
+    assert (resumed.learned, resumed.score, resumed.steps_used) == \
+        (uninterrupted.learned, uninterrupted.score, uninterrupted.steps_used)
+    assert resumed.episodes == uninterrupted.episodes
+    for name, weights in model.policy.state_dict().items():
+        assert torch.equal(weights, resumed_model.policy.state_dict()[name]), name
