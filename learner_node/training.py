@@ -44,7 +44,8 @@ import numpy as np
 
 from glocal_ros.seeds import MAX_SEED, derived_seed
 from glocal_ros.tasks import validate_tasks
-from learner_node.evaluation import BatchStepper, Score, evaluate
+from glocal_ros.sim_contract import BatchStepper
+from learner_node.evaluation import Score, evaluate
 from learner_node.policies import RANDOM_POLICY, PolicyRegistry
 from glocal_ros.files import atomic_write
 from learner_node.policy_store import PolicyRecord, check_name

@@ -11,10 +11,10 @@ gone, so the VecEnv starts new ones and reports the cut episodes as
 truncated, with the true last observation as ``terminal_observation``: SAC
 bootstraps from it as it does at a time limit, and no transition is made up.
 
-``while_stepping`` runs during every step: after the batch was sent, when
-the envs have ``start_step`` (the sim node's client), so the learner's own
-work overlaps the sim's; just before the step otherwise (in-process envs
-step in this thread). The learner puts its gradient steps there.
+``while_stepping`` runs during every step, between ``start_step`` and its
+finish: after the batch was sent to the sim node, so the learner's own work
+overlaps the sim's; just before the step for in-process envs (they step in
+this thread). The learner puts its gradient steps there.
 """
 
 from __future__ import annotations
@@ -27,8 +27,7 @@ import numpy as np
 from gymnasium import spaces
 from stable_baselines3.common.vec_env import VecEnv
 
-from learner_node.evaluation import BatchStepper
-from sim_node.episode import PHASE_TRAIN
+from glocal_ros.sim_contract import PHASE_TRAIN, BatchStepper
 
 
 @dataclass(frozen=True)
@@ -109,14 +108,9 @@ class BatchVecEnv(VecEnv):
 
     def step_wait(self):
         request = (self._actions, self._reserved, PHASE_TRAIN, self.policy_name, self.global_step())
-        start_step = getattr(self.envs, "start_step", None)
-        if start_step is None:
-            self.while_stepping()
-            batch = self.envs.step(*request)
-        else:
-            finish_step = start_step(*request)
-            self.while_stepping()
-            batch = finish_step()
+        finish_step = self.envs.start_step(*request)
+        self.while_stepping()
+        batch = finish_step()
         self._returns += batch.rewards
         self._lengths += 1
         dones = batch.terminated | batch.truncated
