@@ -29,9 +29,9 @@ from rosbags.typesys.store import Typestore
 
 from glocal_ros.recording import graph_typestore
 from glocal_ros.tasks import UnknownTaskError, sorted_tasks
+from glocal_ros.topics import CURRICULUM_STATE, EPISODES_TOPIC
 
-CURRICULUM_STATE_TOPIC = "/glocal/curriculum_state"
-EPISODES_TOPIC = "/glocal/episodes"
+CURRICULUM_STATE_TOPIC = CURRICULUM_STATE.name
 
 # CurriculumState.STATUS_* and EpisodeRecord.PHASE_*, as in msg_schemas/msg.
 STATUS_STARTING = 0
