@@ -13,7 +13,7 @@ import sys
 from pathlib import Path
 
 from glocal_ros.bag_cli import add_bag_commands
-from glocal_ros.curriculum import STRATEGY_NAMES
+from glocal_ros.curriculum.codes import STRATEGY_NAMES
 from glocal_ros.paths import assets_dir, objects_dir
 from glocal_ros.tasks import parse_task_list, sorted_tasks
 

@@ -44,6 +44,7 @@ import numpy as np
 
 from glocal_ros.seeds import MAX_SEED, derived_seed
 from glocal_ros.tasks import validate_tasks
+from glocal_ros.curriculum.learner import EpisodeSummary as FinishedEpisode  # one type: EpisodeOutcome.msg
 from glocal_ros.sim_contract import BatchStepper
 from learner_node.evaluation import Score, evaluate
 from learner_node.policies import RANDOM_POLICY, PolicyRegistry
@@ -52,7 +53,7 @@ from learner_node.policy_store import PolicyRecord, check_name
 from learner_node.replay_buffer import load_replay_buffer, save_replay_buffer
 from learner_node.sac_settings import SAC_KWARGS, SCHEDULE_KEYS, TORCH_THREADS
 from learner_node.updates import OverlappedUpdates
-from learner_node.vec_env import BatchVecEnv, FinishedEpisode, TaskCycle
+from learner_node.vec_env import BatchVecEnv, TaskCycle
 
 #: B as a share of the evaluation episodes: the paper's 75 of 100.
 DEFAULT_THRESHOLD_FRACTION = 0.75

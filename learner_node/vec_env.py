@@ -20,24 +20,14 @@ this thread). The learner puts its gradient steps there.
 from __future__ import annotations
 
 from collections import deque
-from dataclasses import dataclass
 from typing import Any, Callable, Iterable, Sequence
 
 import numpy as np
 from gymnasium import spaces
 from stable_baselines3.common.vec_env import VecEnv
 
+from glocal_ros.curriculum.learner import EpisodeSummary
 from glocal_ros.sim_contract import PHASE_TRAIN, BatchStepper
-
-
-@dataclass(frozen=True)
-class FinishedEpisode:
-    """One training episode that ran to its end (success or time limit)."""
-
-    task: str
-    episode_return: float
-    length: int
-    success: bool
 
 
 class TaskCycle:
@@ -90,7 +80,7 @@ class BatchVecEnv(VecEnv):
         self._returns = np.zeros(self.num_envs)
         self._lengths = np.zeros(self.num_envs, dtype=int)
         self._actions: np.ndarray | None = None
-        self.finished: deque[FinishedEpisode] = deque()  # drained by the trainer
+        self.finished: deque[EpisodeSummary] = deque()  # drained by the trainer
 
     def reset(self) -> np.ndarray:
         self._running = [next(self.tasks) for _ in range(self.num_envs)]
@@ -116,7 +106,7 @@ class BatchVecEnv(VecEnv):
         dones = batch.terminated | batch.truncated
         infos: list[dict[str, Any]] = [{} for _ in range(self.num_envs)]
         for i in np.flatnonzero(dones):
-            self.finished.append(FinishedEpisode(self._running[i], float(self._returns[i]), int(self._lengths[i]),
+            self.finished.append(EpisodeSummary(self._running[i], float(self._returns[i]), int(self._lengths[i]),
                                                  bool(batch.is_success[i])))
             infos[i] = self._end_info(batch.terminal_observations[i], bool(batch.truncated[i] and not batch.terminated[i]),
                                       bool(batch.is_success[i]))

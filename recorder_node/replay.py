@@ -31,6 +31,7 @@ from rclpy.signals import SignalHandlerOptions
 from rosbags.interfaces import Qos, QosDurability, QosHistory, QosReliability
 
 from glocal_ros.recording import episode_seq_from_cdr, graph_typestore, open_bag
+from glocal_ros.spaces import CONTROL_PERIOD
 from glocal_ros.topics import EPISODES_TOPIC, GRAPH_TOPICS, JOINT_STATES
 from node_common.runner import SHUTDOWN_POLL_SEC, configure_discovery
 from recorder_node.recorder_node import message_class
@@ -127,11 +128,8 @@ class BagSource:
 
 
 def default_step_period() -> float:
-    """The env's control period (s): physics substeps per env step x physics timestep."""
-    from sim_node.grasp_env import GraspEnvConfig  # pybullet: only when an episode is replayed
-
-    config = GraspEnvConfig()
-    return config.substeps * config.timestep
+    """The env's default control period (s): physics substeps per env step x physics timestep."""
+    return CONTROL_PERIOD
 
 
 class EpisodeSource:

@@ -18,18 +18,20 @@ import pytest
 from glocal_ros.analysis import figures
 from glocal_ros.analysis.report import write_report
 from glocal_ros.analysis.runs import (
-    STATUS_EVALUATING,
-    STATUS_FINISHED,
-    STATUS_STARTING,
-    STATUS_TRAINING,
-    STATUS_TRAINING_GLOBAL,
-    STATUS_TRAINING_LOCAL,
     group_by_strategy,
     learned_curve_band,
     milestone_table,
     read_run,
     read_runs,
     welch_p_value,
+)
+from glocal_ros.curriculum.codes import (
+    STATUS_EVALUATING,
+    STATUS_FINISHED,
+    STATUS_STARTING,
+    STATUS_TRAINING,
+    STATUS_TRAINING_GLOBAL,
+    STATUS_TRAINING_LOCAL,
 )
 from glocal_ros.recording import BagWriter, graph_typestore
 from glocal_ros.tasks import ALL_TASKS
