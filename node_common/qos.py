@@ -1,7 +1,7 @@
 """rclpy QoS profiles of the graph, built from the plain data of ``glocal_ros.topics``.
 
-The table there is the one place a topic's QoS is decided (see README,
-"Topics"); this module only turns it into ``QoSProfile`` objects.
+The table there is the one place a topic's QoS is decided; this module only
+turns it into ``QoSProfile`` objects.
 """
 
 from __future__ import annotations

@@ -16,7 +16,7 @@ import pytest
 from glocal_interfaces.msg import TrainingProgress
 
 from conftest import REPO, wait_until
-from glocal_ros.processes import NodeProcess
+from glocal_app.processes import NodeProcess
 from node_common import names, qos
 
 SMOKE = REPO / "assets" / "params" / "smoke.yaml"
