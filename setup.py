@@ -1,5 +1,8 @@
 """ament_python package ``glocal_ros``: pip-installable and colcon-buildable.
 
+It holds every Python room: the library ``glocal_ros``, ``node_common``, the
+node packages and the application ``glocal_app`` (the ``glocal-ros`` script).
+
 Dependencies are pinned in requirements.txt (and constraints.txt); ``make
 setup`` installs them. Nodes are installed twice on purpose: as console
 scripts (on PATH in a venv) and as plain executables in ``lib/glocal_ros``,
@@ -8,13 +11,15 @@ where ``ros2 run`` looks on a full ROS 2 install (pip ignores setup.cfg's
 """
 
 import os
+import runpy
 from pathlib import Path
 
 from setuptools import find_packages, setup
 
 PACKAGE = "glocal_ros"
-NODES = ("sim_node", "learner_node", "curriculum_node", "recorder_node")
 HERE = Path(__file__).resolve().parent
+# Read, not imported: the package's dependencies need not be installed yet.
+NODES = runpy.run_path(str(HERE / "glocal_app" / "nodes.py"))["NODES"]
 
 
 def asset_files() -> list[tuple[str, list[str]]]:
@@ -30,7 +35,8 @@ def asset_files() -> list[tuple[str, list[str]]]:
 setup(
     name=PACKAGE,
     version="0.1.0",
-    packages=find_packages(include=[PACKAGE, f"{PACKAGE}.*", "node_common", *NODES], exclude=["test"]),
+    packages=find_packages(include=[PACKAGE, f"{PACKAGE}.*", "node_common", *NODES, "glocal_app", "glocal_app.*"],
+                           exclude=["test"]),
     data_files=[
         ("share/ament_index/resource_index/packages", [f"resource/{PACKAGE}"]),
         (f"share/{PACKAGE}", ["package.xml"]),
@@ -45,7 +51,7 @@ setup(
     license="Apache-2.0",
     entry_points={
         "console_scripts": [
-            "glocal-ros = glocal_ros.cli:main",
+            "glocal-ros = glocal_app.cli:main",
             *(f"{node} = {node}.{node}:main" for node in NODES),
         ],
     },

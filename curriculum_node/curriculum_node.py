@@ -17,7 +17,6 @@ parameters and ``state_dir`` goes on where the last one stopped;
 from __future__ import annotations
 
 import json
-import os
 import threading
 import traceback
 from dataclasses import MISSING, asdict, fields
@@ -29,6 +28,7 @@ from rclpy.node import Node
 
 from glocal_ros.curriculum.journal import JournaledLearner
 from glocal_ros.files import atomic_write
+from glocal_ros.paths import ros_home
 from glocal_ros.curriculum.run import Assignment, Run, RunConfig, RunState
 from glocal_ros.curriculum.strategies import STRATEGIES, run_strategy
 from glocal_ros.tasks import parse_task_list
@@ -169,7 +169,7 @@ def state_message(state: RunState, stamp) -> CurriculumState:
 
 def default_state_dir(run_id: str) -> Path:
     """``$ROS_HOME/glocal_ros/runs/<run_id>`` (ROS_HOME defaults to ~/.ros)."""
-    return Path(os.environ.get("ROS_HOME", Path.home() / ".ros")) / "glocal_ros" / "runs" / run_id
+    return ros_home() / "glocal_ros" / "runs" / run_id
 
 
 def main(args=None) -> int:

@@ -38,6 +38,11 @@ def objects_dir() -> Path:
     return assets_dir() / "objects"
 
 
+def ros_home() -> Path:
+    """``$ROS_HOME``, ``~/.ros`` when unset (as ROS 2 itself decides): where nodes keep state by default."""
+    return Path(os.environ.get("ROS_HOME", Path.home() / ".ros"))
+
+
 def interface_definitions_dir() -> Path:
     """The .msg files of glocal_interfaces (message definitions for recording)."""
     if (SOURCE_ROOT / "msg_schemas" / "msg").is_dir():

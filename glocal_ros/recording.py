@@ -32,34 +32,11 @@ from rosbags.typesys import Stores, get_types_from_msg, get_typestore
 from rosbags.typesys.store import Typestore
 
 from glocal_ros.paths import interface_definitions_dir
+from glocal_ros.topics import EPISODES_TOPIC, RECORDED_TOPICS, TopicSpec
 
 INTERFACE_PACKAGE = "glocal_interfaces"
-#: The topic whose EpisodeRecord.seq counts a sim node's episodes from 0 without gaps.
-EPISODES_TOPIC = "/glocal/episodes"
 #: The space a recording bag keeps free for closing itself on a full disk (see ``BagWriter``).
 RESERVE_FILE = ".space-reserve"
-
-
-@dataclass(frozen=True)
-class TopicSpec:
-    name: str  # as recorded, absolute
-    msgtype: str  # e.g. glocal_interfaces/msg/EpisodeRecord
-    reliable: bool
-    transient_local: bool
-    depth: int
-
-
-#: Every topic of the graph, with the QoS its publisher offers.
-GRAPH_TOPICS: tuple[TopicSpec, ...] = (
-    TopicSpec(EPISODES_TOPIC, "glocal_interfaces/msg/EpisodeRecord", True, False, 1000),
-    TopicSpec("/glocal/curriculum_state", "glocal_interfaces/msg/CurriculumState", True, True, 10),
-    TopicSpec("/glocal/task_assignment", "glocal_interfaces/msg/TaskAssignment", True, True, 10),
-    TopicSpec("/glocal/training_progress", "glocal_interfaces/msg/TrainingProgress", True, False, 100),
-    TopicSpec("/glocal/evaluations", "glocal_interfaces/msg/EvaluationResult", True, False, 100),
-    TopicSpec("/joint_states", "sensor_msgs/msg/JointState", False, False, 5),
-    TopicSpec("/glocal/object_pose", "geometry_msgs/msg/PoseStamped", False, False, 5),
-    TopicSpec("/glocal/grasp_state", "glocal_interfaces/msg/GraspState", False, False, 5),
-)
 
 
 def graph_typestore(definitions_dir: Path | None = None) -> Typestore:
@@ -77,9 +54,9 @@ def _offered_qos(spec: TopicSpec) -> Qos:
     zero = QosTime(sec=0, nsec=0)
     return Qos(
         history=QosHistory.KEEP_LAST,
-        depth=spec.depth,
-        reliability=QosReliability.RELIABLE if spec.reliable else QosReliability.BEST_EFFORT,
-        durability=QosDurability.TRANSIENT_LOCAL if spec.transient_local else QosDurability.VOLATILE,
+        depth=spec.qos.depth,
+        reliability=QosReliability.RELIABLE if spec.qos.reliable else QosReliability.BEST_EFFORT,
+        durability=QosDurability.TRANSIENT_LOCAL if spec.qos.transient_local else QosDurability.VOLATILE,
         deadline=zero,
         lifespan=zero,
         liveliness=QosLiveliness.AUTOMATIC,
@@ -141,7 +118,7 @@ class BagWriter:
     #: and metadata.yaml: enough for ~80,000 chunks.
     RESERVE_BYTES = 8 * 2**20
 
-    def __init__(self, path: Path, topics: tuple[TopicSpec, ...] = GRAPH_TOPICS, typestore: Typestore | None = None):
+    def __init__(self, path: Path, topics: tuple[TopicSpec, ...] = RECORDED_TOPICS, typestore: Typestore | None = None):
         self.path = Path(path)
         self.typestore = typestore or graph_typestore()
         self._writer = Writer(self.path, version=9, storage_plugin=StoragePlugin.MCAP)

@@ -1,8 +1,8 @@
 """The paper's score, computed over a batch of envs: successes out of S-bar episodes.
 
-ROS-free: ``evaluate`` drives anything with the batch interface of
-``sim_node.batch.BatchedEnvs`` (the sim node's client has the same one), so it
-is tested against real envs in-process and runs over the graph unchanged.
+ROS-free: ``evaluate`` drives any ``glocal_ros.sim_contract.BatchStepper``
+(the sim's in-process batch, or the sim node's client), so it is tested
+against real envs in-process and runs over the graph unchanged.
 
 Every requested episode is one job; all envs work through the job queue at
 once, each env holding the job it will start when its current episode ends.
@@ -14,20 +14,14 @@ from __future__ import annotations
 
 from collections import deque
 from dataclasses import dataclass
-from typing import Callable, Protocol, Sequence
+from typing import Callable, Sequence
 
 import numpy as np
 
-from sim_node.episode import PHASE_EVAL
+from glocal_ros.sim_contract import PHASE_EVAL, BatchStepper
 
 #: ``policy(observations (N, obs_dim)) -> actions (N, action_dim)``.
 BatchPolicy = Callable[[np.ndarray], np.ndarray]
-
-
-class BatchStepper(Protocol):
-    def reset(self, env_indices=(), tasks=(), seeds=(), phase=0, policy_name=""): ...
-
-    def step(self, actions, next_tasks=(), phase=0, policy_name="", global_step=0): ...
 
 
 @dataclass(frozen=True)

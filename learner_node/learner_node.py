@@ -23,7 +23,6 @@ shipped A0 ``prior``; ``learner/copy_policy`` copies one into the store.
 
 from __future__ import annotations
 
-import os
 import threading
 import time
 from collections import deque
@@ -39,7 +38,7 @@ from rclpy.action import ActionServer, CancelResponse, GoalResponse
 from rclpy.callback_groups import MutuallyExclusiveCallbackGroup, ReentrantCallbackGroup
 from rclpy.node import Node
 
-from glocal_ros.paths import assets_dir
+from glocal_ros.paths import assets_dir, ros_home
 from glocal_ros.tasks import validate_tasks
 from learner_node.evaluation import evaluate
 from learner_node.policies import PolicyRegistry
@@ -299,7 +298,7 @@ class LearnerNode(Node):
 
 def default_policy_dir() -> Path:
     """``$ROS_HOME/glocal_ros/policies`` (ROS_HOME defaults to ~/.ros)."""
-    return Path(os.environ.get("ROS_HOME", Path.home() / ".ros")) / "glocal_ros" / "policies"
+    return ros_home() / "glocal_ros" / "policies"
 
 
 def _epoch_seconds(iso_time: str) -> int:

@@ -1,24 +1,24 @@
 """The sim node's batched reset/step, called over ROS with numpy in and out.
 
-``SimClient`` has the batch interface of ``sim_node.batch.BatchedEnvs``, so the
-learner's evaluation and training code cannot tell the graph from an
-in-process batch. Calls block: use it from a thread other than the one
+``SimClient`` is a ``glocal_ros.sim_contract.BatchStepper``, as the sim's
+in-process batch is, so the learner's evaluation and training code cannot
+tell the graph from an in-process batch. Calls block: use it from a thread other than the one
 spinning its node's executor.
 """
 
 from __future__ import annotations
 
-from typing import Callable, Sequence
+from typing import Sequence
 
 import numpy as np
 from glocal_interfaces.srv import ResetEnvs, StepEnvs
 from rclpy.callback_groups import ReentrantCallbackGroup
 from rclpy.node import Node
 
+from glocal_ros.sim_contract import PHASE_TRAIN, EpisodeLog, FinishStep, StepBatch
 from node_common import names
 from node_common.arrays import from_float32_field, to_float32_field
 from node_common.calls import call_checked, start_call, wait_for_service
-from sim_node.batch import StepBatch
 
 
 class SimClient:
@@ -43,8 +43,8 @@ class SimClient:
 
     def reset(
         self, env_indices: Sequence[int] = (), tasks: Sequence[str] = (), seeds: Sequence[int] = (),
-        phase: int = 0, policy_name: str = "",
-    ) -> tuple[np.ndarray, list]:
+        phase: int = PHASE_TRAIN, policy_name: str = "",
+    ) -> tuple[np.ndarray, list[EpisodeLog]]:
         request = ResetEnvs.Request(
             env_indices=[int(i) for i in env_indices], tasks=list(tasks), seeds=[int(s) for s in seeds],
             phase=phase, policy_name=policy_name,
@@ -56,15 +56,15 @@ class SimClient:
         return observations, []
 
     def step(
-        self, actions: np.ndarray, next_tasks: Sequence[str] = (), phase: int = 0, policy_name: str = "",
+        self, actions: np.ndarray, next_tasks: Sequence[str] = (), phase: int = PHASE_TRAIN, policy_name: str = "",
         global_step: int = 0,
     ) -> StepBatch:
         return self.start_step(actions, next_tasks, phase, policy_name, global_step)()
 
     def start_step(
-        self, actions: np.ndarray, next_tasks: Sequence[str] = (), phase: int = 0, policy_name: str = "",
+        self, actions: np.ndarray, next_tasks: Sequence[str] = (), phase: int = PHASE_TRAIN, policy_name: str = "",
         global_step: int = 0,
-    ) -> Callable[[], StepBatch]:
+    ) -> FinishStep:
         """Send the step now; the returned function waits for its batch (the learner trains meanwhile)."""
         request = StepEnvs.Request(
             actions=to_float32_field(actions), next_tasks=list(next_tasks), phase=phase,

@@ -47,16 +47,18 @@ from typing import Callable
 
 import numpy as np
 
-from glocal_ros.seeds import MAX_SEED, derived_seed
-from glocal_ros.tasks import validate_tasks
-from learner_node.evaluation import BatchStepper, Score, evaluate
-from learner_node.policies import RANDOM_POLICY, PolicyRegistry
+from glocal_ros.curriculum.learner import EpisodeSummary
 from glocal_ros.files import atomic_write
+from glocal_ros.seeds import MAX_SEED, derived_seed
+from glocal_ros.sim_contract import BatchStepper
+from glocal_ros.tasks import validate_tasks
+from learner_node.evaluation import Score, evaluate
+from learner_node.policies import RANDOM_POLICY, PolicyRegistry
 from learner_node.policy_store import PolicyRecord, check_name
 from learner_node.replay_buffer import load_replay_buffer, save_replay_buffer
 from learner_node.sac_settings import SAC_KWARGS, SCHEDULE_KEYS, TORCH_THREADS
 from learner_node.updates import OverlappedUpdates
-from learner_node.vec_env import BatchVecEnv, FinishedEpisode, TaskCycle
+from learner_node.vec_env import BatchVecEnv, TaskCycle
 
 #: B as a share of the evaluation episodes: the paper's 75 of 100.
 DEFAULT_THRESHOLD_FRACTION = 0.75
@@ -135,7 +137,7 @@ class TrainOutcome:
     learned: bool
     score: Score | None  # the last evaluation of the task; None when the goal has no task or none ran
     steps_used: int
-    episodes: list[FinishedEpisode]
+    episodes: list[EpisodeSummary]
     message: str
     completed: bool  # False: stopped (cancel, shutdown) before its end; nothing was stored
 
@@ -418,7 +420,7 @@ class Trainer:
     def _outcome(state: _GoalState, completed: bool, message: str) -> TrainOutcome:
         score = Score(**state.score) if state.score else None
         return TrainOutcome(state.learned, score, state.steps_used,
-                            [FinishedEpisode(**e) for e in state.episodes], message, completed)
+                            [EpisodeSummary(**e) for e in state.episodes], message, completed)
 
 
 def random_state(model) -> dict:

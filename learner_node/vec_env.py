@@ -11,34 +11,23 @@ gone, so the VecEnv starts new ones and reports the cut episodes as
 truncated, with the true last observation as ``terminal_observation``: SAC
 bootstraps from it as it does at a time limit, and no transition is made up.
 
-``while_stepping`` runs during every step: after the batch was sent, when
-the envs have ``start_step`` (the sim node's client), so the learner's own
-work overlaps the sim's; just before the step otherwise (in-process envs
-step in this thread). The learner puts its gradient steps there.
+``while_stepping`` runs during every step, between ``start_step`` and its
+finish: after the batch was sent to the sim node, so the learner's own work
+overlaps the sim's; just before the step for in-process envs (they step in
+this thread). The learner puts its gradient steps there.
 """
 
 from __future__ import annotations
 
 from collections import deque
-from dataclasses import dataclass
 from typing import Any, Callable, Iterable, Sequence
 
 import numpy as np
 from gymnasium import spaces
 from stable_baselines3.common.vec_env import VecEnv
 
-from learner_node.evaluation import BatchStepper
-from sim_node.episode import PHASE_TRAIN
-
-
-@dataclass(frozen=True)
-class FinishedEpisode:
-    """One training episode that ran to its end (success or time limit)."""
-
-    task: str
-    episode_return: float
-    length: int
-    success: bool
+from glocal_ros.curriculum.learner import EpisodeSummary
+from glocal_ros.sim_contract import PHASE_TRAIN, BatchStepper
 
 
 class TaskCycle:
@@ -91,7 +80,7 @@ class BatchVecEnv(VecEnv):
         self._returns = np.zeros(self.num_envs)
         self._lengths = np.zeros(self.num_envs, dtype=int)
         self._actions: np.ndarray | None = None
-        self.finished: deque[FinishedEpisode] = deque()  # drained by the trainer
+        self.finished: deque[EpisodeSummary] = deque()  # drained by the trainer
 
     def reset(self) -> np.ndarray:
         self._running = [next(self.tasks) for _ in range(self.num_envs)]
@@ -109,20 +98,15 @@ class BatchVecEnv(VecEnv):
 
     def step_wait(self):
         request = (self._actions, self._reserved, PHASE_TRAIN, self.policy_name, self.global_step())
-        start_step = getattr(self.envs, "start_step", None)
-        if start_step is None:
-            self.while_stepping()
-            batch = self.envs.step(*request)
-        else:
-            finish_step = start_step(*request)
-            self.while_stepping()
-            batch = finish_step()
+        finish_step = self.envs.start_step(*request)
+        self.while_stepping()
+        batch = finish_step()
         self._returns += batch.rewards
         self._lengths += 1
         dones = batch.terminated | batch.truncated
         infos: list[dict[str, Any]] = [{} for _ in range(self.num_envs)]
         for i in np.flatnonzero(dones):
-            self.finished.append(FinishedEpisode(self._running[i], float(self._returns[i]), int(self._lengths[i]),
+            self.finished.append(EpisodeSummary(self._running[i], float(self._returns[i]), int(self._lengths[i]),
                                                  bool(batch.is_success[i])))
             infos[i] = self._end_info(batch.terminal_observations[i], bool(batch.truncated[i] and not batch.terminated[i]),
                                       bool(batch.is_success[i]))

@@ -1,5 +1,10 @@
 """Topic, service and action names of the graph (relative: they follow the
-node's namespace, so several sim/learner pairs can share one domain)."""
+node's namespace, so several sim/learner pairs can share one domain).
+
+Topic names come from the one table, ``glocal_ros.topics``.
+"""
+
+from glocal_ros import topics
 
 SIM_RESET = "sim/reset"
 SIM_STEP = "sim/step"
@@ -8,11 +13,11 @@ LEARNER_EVALUATE = "learner/evaluate"
 LEARNER_LIST_POLICIES = "learner/list_policies"
 LEARNER_COPY_POLICY = "learner/copy_policy"
 
-JOINT_STATES = "joint_states"
-OBJECT_POSE = "glocal/object_pose"
-GRASP_STATE = "glocal/grasp_state"
-EPISODES = "glocal/episodes"
-CURRICULUM_STATE = "glocal/curriculum_state"
-TASK_ASSIGNMENT = "glocal/task_assignment"
-TRAINING_PROGRESS = "glocal/training_progress"
-EVALUATIONS = "glocal/evaluations"
+JOINT_STATES = topics.JOINT_STATES.relative_name
+OBJECT_POSE = topics.OBJECT_POSE.relative_name
+GRASP_STATE = topics.GRASP_STATE.relative_name
+EPISODES = topics.EPISODES.relative_name
+CURRICULUM_STATE = topics.CURRICULUM_STATE.relative_name
+TASK_ASSIGNMENT = topics.TASK_ASSIGNMENT.relative_name
+TRAINING_PROGRESS = topics.TRAINING_PROGRESS.relative_name
+EVALUATIONS = topics.EVALUATIONS.relative_name

@@ -1,38 +1,28 @@
-"""QoS profiles of the graph, chosen per topic kind (see README, "Topics")."""
+"""rclpy QoS profiles of the graph, built from the plain data of ``glocal_ros.topics``.
+
+The table there is the one place a topic's QoS is decided; this module only
+turns it into ``QoSProfile`` objects.
+"""
+
+from __future__ import annotations
 
 from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
 
-#: Every episode must reach the recorder: reliable, and a deep queue so that a
-#: burst of finished episodes (N envs ending together) is never dropped.
-EPISODES = QoSProfile(
-    history=HistoryPolicy.KEEP_LAST,
-    depth=1000,
-    reliability=ReliabilityPolicy.RELIABLE,
-    durability=DurabilityPolicy.VOLATILE,
-)
+from glocal_ros import topics
+from glocal_ros.topics import QosSpec
 
-#: Curriculum state and assignments: a late joiner (viewer, recorder) gets the
-#: latest one at once.
-LATCHED = QoSProfile(
-    history=HistoryPolicy.KEEP_LAST,
-    depth=10,
-    reliability=ReliabilityPolicy.RELIABLE,
-    durability=DurabilityPolicy.TRANSIENT_LOCAL,
-)
 
-#: Reliable event streams that are not latched (evaluations, training progress).
-EVENTS = QoSProfile(
-    history=HistoryPolicy.KEEP_LAST,
-    depth=100,
-    reliability=ReliabilityPolicy.RELIABLE,
-    durability=DurabilityPolicy.VOLATILE,
-)
+def profile(spec: QosSpec) -> QoSProfile:
+    """``spec`` as an rclpy profile (keep-last ``spec.depth``)."""
+    return QoSProfile(
+        history=HistoryPolicy.KEEP_LAST,
+        depth=spec.depth,
+        reliability=ReliabilityPolicy.RELIABLE if spec.reliable else ReliabilityPolicy.BEST_EFFORT,
+        durability=DurabilityPolicy.TRANSIENT_LOCAL if spec.transient_local else DurabilityPolicy.VOLATILE,
+    )
 
-#: Throttled viewer streams (joint states, object pose, grasp state): a lost
-#: sample is replaced by the next one.
-VIEWER = QoSProfile(
-    history=HistoryPolicy.KEEP_LAST,
-    depth=5,
-    reliability=ReliabilityPolicy.BEST_EFFORT,
-    durability=DurabilityPolicy.VOLATILE,
-)
+
+EPISODES = profile(topics.EPISODES_QOS)
+LATCHED = profile(topics.LATCHED_QOS)
+EVENTS = profile(topics.EVENTS_QOS)
+VIEWER = profile(topics.VIEWER_QOS)

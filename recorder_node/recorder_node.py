@@ -1,6 +1,6 @@
 """recorder_node: every topic of the graph into one rosbag2 directory (MCAP, zstd chunks).
 
-Subscribes raw (serialized) to the topics of ``glocal_ros.recording.GRAPH_TOPICS``
+Subscribes raw (serialized) to the topics of ``glocal_ros.topics.RECORDED_TOPICS``
 with the QoS their publishers offer, so that messages are written as they
 travelled, and closes the bag cleanly on SIGINT/SIGTERM.
 
@@ -19,16 +19,17 @@ and exits with code 1: a recording with a hole is not a recording.
 from __future__ import annotations
 
 import importlib
+from dataclasses import replace
 from pathlib import Path
 
 from glocal_interfaces.msg import EpisodeRecord
 from rclpy.node import Node
-from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
+from rclpy.qos import QoSProfile
 from rclpy.serialization import deserialize_message
 
-from glocal_ros.recording import (
-    EPISODES_TOPIC, GRAPH_TOPICS, BagWriter, RecordingStopped, SequenceTracker, TopicSpec, episode_seq_from_cdr,
-)
+from glocal_ros.recording import BagWriter, RecordingStopped, SequenceTracker, episode_seq_from_cdr
+from glocal_ros.topics import EPISODES_TOPIC, RECORDED_TOPICS, TopicSpec
+from node_common import qos
 from node_common.params import declare
 from node_common.runner import spin_node
 
@@ -40,12 +41,9 @@ def message_class(msgtype: str):
 
 
 def subscription_qos(spec: TopicSpec) -> QoSProfile:
-    return QoSProfile(
-        history=HistoryPolicy.KEEP_LAST,
-        depth=max(spec.depth, 1000) if spec.reliable else spec.depth,
-        reliability=ReliabilityPolicy.RELIABLE if spec.reliable else ReliabilityPolicy.BEST_EFFORT,
-        durability=DurabilityPolicy.TRANSIENT_LOCAL if spec.transient_local else DurabilityPolicy.VOLATILE,
-    )
+    """The publisher's QoS, with a queue of 1000 at least on reliable topics: a burst must not overflow it."""
+    offered = spec.qos
+    return qos.profile(replace(offered, depth=max(offered.depth, 1000)) if offered.reliable else offered)
 
 
 class RecorderNode(Node):
@@ -58,11 +56,11 @@ class RecorderNode(Node):
         self.exit_code = 0
         self.create_timer(flush_interval, self._flush)
         self.episode_seqs = SequenceTracker()
-        for spec in GRAPH_TOPICS:
+        for spec in RECORDED_TOPICS:
             self.create_subscription(
                 message_class(spec.msgtype), spec.name, self._writer_for(spec.name), subscription_qos(spec), raw=True
             )
-        self.get_logger().info(f"recording {len(GRAPH_TOPICS)} topics into {output}")
+        self.get_logger().info(f"recording {len(RECORDED_TOPICS)} topics into {output}")
 
     def _flush(self) -> None:
         try:

@@ -4,7 +4,7 @@
 recorded: nothing is decoded or re-encoded) on the topic names as recorded,
 which are absolute, with the recorded spacing divided by ``rate``. Each
 publisher offers the QoS the recorded publishers offered (from the bag's
-``offered_qos_profiles``, else from ``GRAPH_TOPICS``), so late-joining
+``offered_qos_profiles``, else from ``glocal_ros.topics.GRAPH_TOPICS``), so late-joining
 viewers still get the latched curriculum state.
 
 ``replay(bag, episode=SEQ)`` plays one EpisodeRecord back for a viewer
@@ -30,11 +30,13 @@ from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPo
 from rclpy.signals import SignalHandlerOptions
 from rosbags.interfaces import Qos, QosDurability, QosHistory, QosReliability
 
-from glocal_ros.recording import EPISODES_TOPIC, GRAPH_TOPICS, episode_seq_from_cdr, graph_typestore, open_bag
+from glocal_ros.recording import episode_seq_from_cdr, graph_typestore, open_bag
+from glocal_ros.spaces import CONTROL_PERIOD
+from glocal_ros.topics import EPISODES_TOPIC, GRAPH_TOPICS, JOINT_STATES
 from node_common.runner import SHUTDOWN_POLL_SEC, configure_discovery
 from recorder_node.recorder_node import message_class
 
-JOINT_STATES_TOPIC = "/joint_states"
+JOINT_STATES_TOPIC = JOINT_STATES.name
 #: Longest wait for subscribers before the first message (see ReplayNode.wait_for_subscribers):
 #: discovery between two processes on loopback takes up to about 3 s here.
 DEFAULT_WAIT_SEC = 5.0
@@ -80,12 +82,12 @@ def publisher_qos(topic: str, recorded: Sequence[Qos]) -> QoSProfile:
         keep_all = all(qos.history == QosHistory.KEEP_ALL for qos in known)
         depth = max(qos.depth for qos in known)
     elif spec is not None:
-        reliable, latched, keep_all, depth = spec.reliable, spec.transient_local, False, spec.depth
+        reliable, latched, keep_all, depth = spec.qos.reliable, spec.qos.transient_local, False, spec.qos.depth
     else:  # neither recorded nor known: rclpy's defaults
         reliable, latched, keep_all, depth = True, False, False, 10
     return QoSProfile(
         history=HistoryPolicy.KEEP_ALL if keep_all else HistoryPolicy.KEEP_LAST,
-        depth=depth or (spec.depth if spec is not None else 10),
+        depth=depth or (spec.qos.depth if spec is not None else 10),
         reliability=ReliabilityPolicy.RELIABLE if reliable else ReliabilityPolicy.BEST_EFFORT,
         durability=DurabilityPolicy.TRANSIENT_LOCAL if latched else DurabilityPolicy.VOLATILE,
     )
@@ -126,11 +128,8 @@ class BagSource:
 
 
 def default_step_period() -> float:
-    """The env's control period (s): physics substeps per env step x physics timestep."""
-    from sim_node.grasp_env import GraspEnvConfig  # pybullet: only when an episode is replayed
-
-    config = GraspEnvConfig()
-    return config.substeps * config.timestep
+    """The env's default control period (s): physics substeps per env step x physics timestep."""
+    return CONTROL_PERIOD
 
 
 class EpisodeSource:

@@ -1,7 +1,7 @@
 """N grasp envs stepped in lockstep, with automatic reset and episode logs.
 
-This is the sim node without ROS: ``reset`` and ``step`` take and return
-whole batches, validate their input (``ValueError`` with a message a user can
+This is the sim node without ROS, a ``glocal_ros.sim_contract.BatchStepper``:
+``reset`` and ``step`` take and return whole batches, validate their input (``ValueError`` with a message a user can
 act on), and hand back every episode that finished so that the node can
 publish it. Envs reset automatically when their episode ends, as in a
 stable-baselines3 VecEnv; the last observation comes back separately.
@@ -9,15 +9,16 @@ stable-baselines3 VecEnv; the last observation comes back separately.
 
 from __future__ import annotations
 
+import functools
 from dataclasses import dataclass
 from typing import TYPE_CHECKING, Callable, Protocol, Sequence
 
 import numpy as np
 
+from glocal_ros.sim_contract import PHASE_EVAL, PHASE_TRAIN, PHASES, UNSEEDED, EpisodeLog, FinishStep, StepBatch
 from glocal_ros.tasks import task_index
-from sim_node.episode import PHASE_EVAL, PHASE_TRAIN, UNSEEDED, EpisodeLog
 
-if TYPE_CHECKING:  # the learner imports this module's types and must not load pybullet
+if TYPE_CHECKING:  # importing the batch must not load pybullet (workers and tests make their own envs)
     from sim_node.grasp_env import GraspState
 
 #: float32 rounding of a tanh-squashed action can overshoot 1 by an ulp or so.
@@ -54,18 +55,6 @@ class EnvSnapshot:
     object_orientation: np.ndarray  # quaternion x, y, z, w
     grasp: GraspState
     lifted: bool  # lifted above the success height
-
-
-@dataclass
-class StepBatch:
-    observations: np.ndarray  # (N, obs_dim) after automatic resets
-    rewards: np.ndarray  # (N,)
-    terminated: np.ndarray  # (N,) bool
-    truncated: np.ndarray  # (N,) bool
-    is_success: np.ndarray  # (N,) bool
-    terminal_observations: np.ndarray  # (N, obs_dim), zero rows where no episode ended
-    tasks: list[str]
-    finished: list[EpisodeLog]
 
 
 def normalize_reset(
@@ -122,7 +111,7 @@ def _per_env(values: list, count: int, name: str, default) -> list:
 
 
 def _check_phase(phase: int) -> None:
-    if phase not in (PHASE_TRAIN, PHASE_EVAL):
+    if phase not in PHASES:
         raise ValueError(f"phase must be {PHASE_TRAIN} (train) or {PHASE_EVAL} (eval), got {phase}")
 
 
@@ -189,6 +178,17 @@ class BatchedEnvs:
         """Step every env once with its row of ``actions`` (shape ``(N, action_dim)`` or flat)."""
         actions, next_tasks = normalize_step(self.num_envs, self.action_dim, actions, next_tasks, phase)
         return self.apply_step(actions, next_tasks, phase, policy_name, global_step)
+
+    def start_step(
+        self,
+        actions: np.ndarray,
+        next_tasks: Sequence[str] = (),
+        phase: int = PHASE_TRAIN,
+        policy_name: str = "",
+        global_step: int = 0,
+    ) -> FinishStep:
+        """``step``, run when the returned function is called: these envs step in the caller's thread."""
+        return functools.partial(self.step, actions, next_tasks, phase, policy_name, global_step)
 
     def apply_reset(
         self, indices: list[int], tasks: list[str | None], seeds: list[int], phase: int, policy_name: str

@@ -62,6 +62,7 @@ import pybullet
 from gymnasium import spaces
 from pybullet_utils.bullet_client import BulletClient
 
+from glocal_ros.spaces import ACTION_DIM, OBS_DIM, PHYSICS_TIMESTEP, SUBSTEPS
 from glocal_ros.tasks import NUM_TASKS, PRIOR_TASK, task_index
 from sim_node.grasp_world import OBJECT_SPOT, TABLE_TOP_Z, GraspWorld
 from sim_node.panda_robot import FINGER_MAX_POSITION, JOINT_NAMES, yaw_of
@@ -76,8 +77,6 @@ OBS_OBJECT_RELATIVE_POSITION = slice(55, 58)
 OBS_OBJECT_RELATIVE_YAW = slice(58, 60)
 OBS_OBJECT_LIFT = 60
 OBS_FINGER_CONTACTS = slice(61, 63)
-OBS_SIZE = 63
-ACTION_SIZE = 5
 
 YAW_LIMIT = 5 * math.pi / 8
 """Gripper yaw range (rad, either side of home); joint 7's limits allow about 2.18."""
@@ -93,9 +92,9 @@ class GraspEnvConfig:
 
     max_steps: int = 50
     """Episode length T: the episode truncates after this many steps."""
-    substeps: int = 10
+    substeps: int = SUBSTEPS
     """Physics steps per env step."""
-    timestep: float = 1.0 / 240.0
+    timestep: float = PHYSICS_TIMESTEP
     """Physics step (s)."""
     translation_step: float = 0.02
     """TCP move for an action component of 1 (m)."""
@@ -145,8 +144,8 @@ class GraspState:
 
 
 def _observation_bounds(config: GraspEnvConfig) -> tuple[np.ndarray, np.ndarray]:
-    low = np.zeros(OBS_SIZE, dtype=np.float32)
-    high = np.ones(OBS_SIZE, dtype=np.float32)
+    low = np.zeros(OBS_DIM, dtype=np.float32)
+    high = np.ones(OBS_DIM, dtype=np.float32)
     # The TCP tracks targets inside the workspace to within millimetres; the
     # margin covers an arm pushed by contacts.
     reach = config.workspace_half_width + _OBS_MARGIN
@@ -197,7 +196,7 @@ class GraspEnv(gym.Env[np.ndarray, np.ndarray]):
         self.metadata = {**self.metadata, "render_fps": round(1.0 / step_duration)}
         self.objects_dir = Path(objects_dir) if objects_dir is not None else DEFAULT_OBJECTS_DIR
         self.render_mode = render_mode
-        self.action_space = spaces.Box(-1.0, 1.0, shape=(ACTION_SIZE,), dtype=np.float32)
+        self.action_space = spaces.Box(-1.0, 1.0, shape=(ACTION_DIM,), dtype=np.float32)
         low, high = _observation_bounds(self.config)
         self.observation_space = spaces.Box(low, high, dtype=np.float32)
 
@@ -293,8 +292,8 @@ class GraspEnv(gym.Env[np.ndarray, np.ndarray]):
         if self._needs_reset:
             raise RuntimeError("call reset() before step()")
         command = np.asarray(action, dtype=np.float64)
-        if command.shape != (ACTION_SIZE,):
-            raise ValueError(f"action must have shape ({ACTION_SIZE},), got {command.shape}")
+        if command.shape != (ACTION_DIM,):
+            raise ValueError(f"action must have shape ({ACTION_DIM},), got {command.shape}")
         if np.isnan(command).any():
             raise ValueError(f"action contains NaN: {command.tolist()}")
         command = np.clip(command, -1.0, 1.0)
@@ -336,7 +335,7 @@ class GraspEnv(gym.Env[np.ndarray, np.ndarray]):
         relative_yaw = 2.0 * (yaw_of(tuple(orientation)) - yaw)
         self._state = GraspState(left, right, opening, lift, self._steps)
 
-        observation = np.zeros(OBS_SIZE, dtype=np.float64)
+        observation = np.zeros(OBS_DIM, dtype=np.float64)
         observation[task_index(self._task)] = 1.0
         observation[OBS_GRIPPER_POSITION] = tcp - self._origin
         observation[OBS_GRIPPER_YAW] = (math.sin(yaw), math.cos(yaw))

@@ -1,6 +1,7 @@
 """A batch of envs split over worker processes that step their shares in parallel.
 
-``ProcessBatchedEnvs`` has the interface of ``BatchedEnvs``. Requests are
+``ProcessBatchedEnvs`` has the interface of ``BatchedEnvs`` (a
+``glocal_ros.sim_contract.BatchStepper``). Requests are
 checked whole in this process (``normalize_reset``, ``normalize_step``)
 before any worker acts, so a malformed request changes nothing; each worker
 holds a ``BatchedEnvs`` of consecutive envs and applies its share. Workers
@@ -10,15 +11,16 @@ fork would copy in an undefined state.
 
 from __future__ import annotations
 
+import functools
 import multiprocessing as mp
 import signal
 from typing import Sequence
 
 import numpy as np
 
+from glocal_ros.sim_contract import PHASE_TRAIN, FinishStep, StepBatch
 from glocal_ros.tasks import task_index
-from sim_node.batch import BatchedEnvs, EnvSnapshot, StepBatch, normalize_reset, normalize_step
-from sim_node.episode import PHASE_TRAIN
+from sim_node.batch import BatchedEnvs, EnvSnapshot, normalize_reset, normalize_step
 from sim_node.grasp_env import GraspEnv, GraspEnvConfig
 
 
@@ -117,6 +119,11 @@ class ProcessBatchedEnvs:
         )
         self.tasks = list(result.tasks)
         return result
+
+    def start_step(self, actions: np.ndarray, next_tasks: Sequence[str] = (), phase: int = PHASE_TRAIN,
+                   policy_name: str = "", global_step: int = 0) -> FinishStep:
+        """``step``, run when the returned function is called, as ``BatchedEnvs.start_step`` does."""
+        return functools.partial(self.step, actions, next_tasks, phase, policy_name, global_step)
 
     def snapshot(self, index: int) -> EnvSnapshot:
         worker = next(w for w, share in enumerate(self.shares) if index in share)

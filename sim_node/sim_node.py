@@ -22,6 +22,7 @@ from rclpy.node import Node
 from sensor_msgs.msg import JointState
 
 from glocal_ros.paths import objects_dir
+from glocal_ros.sim_contract import EpisodeLog
 from node_common import names, qos
 from node_common.arrays import from_float32_field, to_float32_field
 from node_common.params import declare
@@ -29,7 +30,6 @@ from node_common.runner import spin_node
 from node_common.services import answers_errors
 from sim_node.batch import BatchedEnvs
 from sim_node.parallel import ProcessBatchedEnvs
-from sim_node.episode import EpisodeLog
 from sim_node.grasp_env import GraspEnv, GraspEnvConfig
 
 WORLD_FRAME = "world"

@@ -16,8 +16,8 @@ from pathlib import Path
 
 import pytest
 
+from glocal_app.processes import NodeProcess
 from glocal_ros.domain import reserve_domain_id
-from glocal_ros.processes import NodeProcess
 from node_common.runner import configure_discovery
 
 REPO = Path(__file__).resolve().parent.parent

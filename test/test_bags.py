@@ -22,7 +22,7 @@ from glocal_ros.recording import BagWriter, episode_seq_from_cdr, episode_sequen
 from node_common import names, qos
 from node_common.arrays import to_float32_field
 
-GLOCAL_ROS = [sys.executable, "-m", "glocal_ros.cli"]
+GLOCAL_ROS = [sys.executable, "-m", "glocal_app.cli"]
 JOINTS = ["panda_joint1", "panda_joint2", "panda_finger_joint1"]
 START_NS = 1_700_000_000 * 10**9
 

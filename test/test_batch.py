@@ -3,9 +3,9 @@
 import numpy as np
 import pytest
 
+from glocal_ros.sim_contract import PHASE_EVAL, PHASE_TRAIN, BatchStepper
 from glocal_ros.tasks import UnknownTaskError, task_index
 from sim_node.batch import BatchedEnvs
-from sim_node.episode import PHASE_EVAL, PHASE_TRAIN
 from sim_node.grasp_env import GraspEnv, GraspEnvConfig
 
 T = 4
@@ -20,6 +20,12 @@ def batch():
 
 def zero_actions(batch):
     return np.zeros((batch.num_envs, batch.action_dim), dtype=np.float32)
+
+
+def test_the_batch_is_a_batch_stepper(batch):
+    assert isinstance(batch, BatchStepper)
+    finish = batch.start_step(zero_actions(batch))
+    assert finish().observations.shape == (3, 63)
 
 
 def test_reset_and_step_shapes(batch):

@@ -2,8 +2,8 @@
 
 from pathlib import Path
 
-from glocal_ros.cli import build_parser, cmd_bench_learner
-from learner_node.bench import LearnerBenchRow, learner_bench_report, run_learner_bench
+from glocal_app.cli import build_parser, cmd_bench_learner
+from glocal_app.benches.learner import LearnerBenchRow, learner_bench_report, run_learner_bench
 
 
 def test_bench_learner_reports_one_row_per_env_count():

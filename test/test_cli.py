@@ -7,7 +7,7 @@ import sys
 
 from conftest import REPO, wait_until
 
-GLOCAL_ROS = [sys.executable, "-m", "glocal_ros.cli"]
+GLOCAL_ROS = [sys.executable, "-m", "glocal_app.cli"]
 
 
 def run_cli(*args, timeout=120):

@@ -6,10 +6,9 @@ import pytest
 
 from glocal_ros.clustering import cluster_tasks, split_global_local
 from glocal_ros.curriculum.journal import JournaledLearner, JournalMismatch
+from glocal_ros.curriculum.codes import ROLE_CLUSTER, ROLE_GLOBAL, ROLE_LOCAL, ROLE_SAMPLED, STATUS_FINISHED
 from glocal_ros.curriculum.learner import TrainRequest
-from glocal_ros.curriculum.run import (
-    ROLE_CLUSTER, ROLE_GLOBAL, ROLE_LOCAL, ROLE_SAMPLED, STATUS_FINISHED, Run, RunConfig,
-)
+from glocal_ros.curriculum.run import Run, RunConfig
 from glocal_ros.curriculum.strategies import STRATEGIES, run_strategy
 from glocal_ros.tasks import ALL_TASKS
 from learner_double import SimulatedLearner
@@ -271,6 +270,6 @@ def test_the_double_refuses_what_the_learner_refuses():
 
 
 def test_every_named_strategy_exists():
-    from glocal_ros.curriculum import STRATEGY_NAMES
+    from glocal_ros.curriculum.codes import STRATEGY_NAMES
 
     assert tuple(STRATEGIES) == STRATEGY_NAMES

@@ -11,7 +11,7 @@ import pytest
 from glocal_interfaces.msg import CurriculumState, TaskAssignment
 
 from conftest import REPO, wait_until
-from glocal_ros.processes import NodeProcess
+from glocal_app.processes import NodeProcess
 from node_common import names, qos
 
 SMOKE = REPO / "assets" / "params" / "smoke.yaml"

@@ -11,7 +11,7 @@ from glocal_interfaces.msg import CurriculumState, EpisodeRecord, TaskAssignment
 from rosbags.highlevel import AnyReader
 
 from conftest import REPO, wait_until
-from glocal_ros.processes import NodeProcess
+from glocal_app.processes import NodeProcess
 from glocal_ros.recording import graph_typestore
 from node_common import names, qos
 from node_common.runner import PROFILES_FILE_VARIABLE

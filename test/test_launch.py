@@ -11,7 +11,7 @@ from rosbags.highlevel import AnyReader
 from conftest import REPO
 from glocal_ros.recording import episode_sequence, graph_typestore
 
-CLI = [sys.executable, "-m", "glocal_ros.cli"]
+CLI = [sys.executable, "-m", "glocal_app.cli"]
 
 
 def launch(run_dir, *args, timeout=300):

@@ -47,7 +47,7 @@ def test_metadata_records_the_graspability_check():
 
 
 def test_assets_show_lists_every_object():
-    result = subprocess.run([sys.executable, "-m", "glocal_ros.cli", "assets", "show"], capture_output=True,
+    result = subprocess.run([sys.executable, "-m", "glocal_app.cli", "assets", "show"], capture_output=True,
                             text=True, timeout=60, cwd=REPO)
     assert result.returncode == 0, result.stderr
     rows = [line.split()[0] for line in result.stdout.splitlines()[1:]]

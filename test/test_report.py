@@ -18,18 +18,20 @@ import pytest
 from glocal_ros.analysis import figures
 from glocal_ros.analysis.report import write_report
 from glocal_ros.analysis.runs import (
-    STATUS_EVALUATING,
-    STATUS_FINISHED,
-    STATUS_STARTING,
-    STATUS_TRAINING,
-    STATUS_TRAINING_GLOBAL,
-    STATUS_TRAINING_LOCAL,
     group_by_strategy,
     learned_curve_band,
     milestone_table,
     read_run,
     read_runs,
     welch_p_value,
+)
+from glocal_ros.curriculum.codes import (
+    STATUS_EVALUATING,
+    STATUS_FINISHED,
+    STATUS_STARTING,
+    STATUS_TRAINING,
+    STATUS_TRAINING_GLOBAL,
+    STATUS_TRAINING_LOCAL,
 )
 from glocal_ros.recording import BagWriter, graph_typestore
 from glocal_ros.tasks import ALL_TASKS
@@ -305,14 +307,14 @@ def test_report_of_a_single_run_has_no_t_test(recorded, tmp_path) -> None:
 def test_cli_report(recorded, tmp_path) -> None:
     run_dirs, _, broken = recorded
     out = tmp_path / "cli"
-    result = subprocess.run([sys.executable, "-m", "glocal_ros.cli", "report", *map(str, run_dirs), str(broken),
+    result = subprocess.run([sys.executable, "-m", "glocal_app.cli", "report", *map(str, run_dirs), str(broken),
                              "--out", str(out)], cwd=REPO, capture_output=True, text=True, timeout=120)
     assert result.returncode == 0, result.stderr
     assert result.stdout.strip().endswith(str(out / "report.md"))
     assert "warning: skipping bag" in result.stderr
     assert (out / "report.md").is_file()
     # No readable run at all: an error message, not a traceback.
-    result = subprocess.run([sys.executable, "-m", "glocal_ros.cli", "report", str(broken), "--out", str(out)],
+    result = subprocess.run([sys.executable, "-m", "glocal_app.cli", "report", str(broken), "--out", str(out)],
                             cwd=REPO, capture_output=True, text=True, timeout=120)
     assert result.returncode == 2 and "no readable run" in result.stderr and "Traceback" not in result.stderr
 
@@ -320,7 +322,7 @@ def test_cli_report(recorded, tmp_path) -> None:
 def test_default_out_is_first_run_dir(recorded, tmp_path) -> None:
     run_dirs, _, _ = recorded
     run_dir = shutil.copytree(run_dirs[0], tmp_path / "copy")
-    from glocal_ros.cli import main
+    from glocal_app.cli import main
 
     assert main(["report", str(run_dir), "--no-episodes"]) == 0
     assert (run_dir / "report" / "report.md").is_file()

@@ -17,7 +17,7 @@ import signal
 import pytest
 
 from conftest import REPO, wait_until
-from glocal_ros.processes import NodeProcess
+from glocal_app.processes import NodeProcess
 
 SMOKE = REPO / "assets" / "params" / "smoke.yaml"
 SEED = 7

@@ -19,7 +19,7 @@ from conftest import answers, wait_until
 from node_common import names, qos
 from node_common.action_client import ActionClient
 from node_common.calls import call
-from sim_node.episode import PHASE_EVAL
+from glocal_ros.sim_contract import PHASE_EVAL
 
 
 class Goal:

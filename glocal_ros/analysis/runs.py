@@ -27,26 +27,18 @@ from rosbags.rosbag2 import Reader, ReaderError
 from rosbags.serde import SerdeError
 from rosbags.typesys.store import Typestore
 
+from glocal_ros.curriculum.codes import (
+    STATUS_FINISHED, STATUS_STARTING, STATUS_TRAINING_GLOBAL, STATUS_TRAINING_LOCAL, STRATEGY_NAMES,
+)
 from glocal_ros.recording import graph_typestore
+from glocal_ros.sim_contract import PHASE_EVAL
 from glocal_ros.tasks import UnknownTaskError, sorted_tasks
+from glocal_ros.topics import CURRICULUM_STATE, EPISODES_TOPIC
 
-CURRICULUM_STATE_TOPIC = "/glocal/curriculum_state"
-EPISODES_TOPIC = "/glocal/episodes"
-
-# CurriculumState.STATUS_* and EpisodeRecord.PHASE_*, as in msg_schemas/msg.
-STATUS_STARTING = 0
-STATUS_EVALUATING = 1
-STATUS_TRAINING_GLOBAL = 2
-STATUS_TRAINING_LOCAL = 3
-STATUS_TRAINING = 4
-STATUS_FINISHED = 5
-PHASE_TRAIN = 0
-PHASE_EVAL = 1
+CURRICULUM_STATE_TOPIC = CURRICULUM_STATE.name
 
 #: The paper's strategies in the order tables and legends list them; others follow alphabetically.
-STRATEGY_ORDER: tuple[str, ...] = (
-    "glocal", "random", "alp_gmm_250", "alp_gmm_10", "glocal_no_global", "glocal_random_cluster",
-)
+STRATEGY_ORDER: tuple[str, ...] = STRATEGY_NAMES
 #: The strategy every other one is t-tested against.
 REFERENCE_STRATEGY = "glocal"
 

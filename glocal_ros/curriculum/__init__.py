@@ -6,7 +6,6 @@ bookkeeping every strategy shares: the step budget, learned tasks,
 milestones, and the state a node publishes. ``curriculum_node`` adapts the
 ``Learner`` protocol onto the learner node's action and service; tests use
 an honest test double.
-"""
 
-#: The strategies by the names parameters and the CLI use (``strategies.STRATEGIES`` runs them).
-STRATEGY_NAMES = ("glocal", "random", "alp_gmm_250", "alp_gmm_10", "glocal_no_global", "glocal_random_cluster")
+Strategy names, statuses and roles: ``glocal_ros.curriculum.codes``.
+"""

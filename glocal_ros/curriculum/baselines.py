@@ -27,7 +27,8 @@ import numpy as np
 
 from glocal_ros.curriculum.alp_gmm import AlpGmmSampler
 from glocal_ros.curriculum.learner import TrainRequest
-from glocal_ros.curriculum.run import ROLE_SAMPLED, Run
+from glocal_ros.curriculum.codes import ROLE_SAMPLED
+from glocal_ros.curriculum.run import Run
 
 
 class TaskSampler(Protocol):

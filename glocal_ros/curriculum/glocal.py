@@ -36,7 +36,8 @@ import numpy as np
 
 from glocal_ros.clustering import cluster_tasks, split_global_local
 from glocal_ros.curriculum.learner import TrainRequest
-from glocal_ros.curriculum.run import ROLE_CLUSTER, ROLE_GLOBAL, ROLE_LOCAL, Run
+from glocal_ros.curriculum.codes import ROLE_CLUSTER, ROLE_GLOBAL, ROLE_LOCAL
+from glocal_ros.curriculum.run import Run
 
 
 def run_glocal(run: Run, ablation: str = "") -> None:

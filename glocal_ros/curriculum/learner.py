@@ -25,6 +25,8 @@ class TrainRequest:
 
 @dataclass(frozen=True)
 class EpisodeSummary:
+    """One training episode that ran to its end (success or time limit): EpisodeOutcome.msg."""
+
     task: str
     episode_return: float
     length: int

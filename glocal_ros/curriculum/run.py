@@ -14,13 +14,13 @@ from dataclasses import dataclass, field, replace
 from typing import Protocol
 
 from glocal_ros.clustering import Clustering
+from glocal_ros.curriculum.codes import (
+    ROLE_CLUSTER, ROLE_GLOBAL, ROLE_LOCAL, ROLE_SAMPLED, STATUS_EVALUATING, STATUS_FINISHED, STATUS_STARTING,
+    STATUS_TRAINING, STATUS_TRAINING_GLOBAL, STATUS_TRAINING_LOCAL,
+)
 from glocal_ros.curriculum.learner import Learner, TrainRequest, TrainResult
 from glocal_ros.tasks import sorted_tasks, validate_tasks
 
-# The values of glocal_interfaces/msg/CurriculumState STATUS_* and TaskAssignment ROLE_*.
-STATUS_STARTING, STATUS_EVALUATING, STATUS_TRAINING_GLOBAL, STATUS_TRAINING_LOCAL = 0, 1, 2, 3
-STATUS_TRAINING, STATUS_FINISHED = 4, 5
-ROLE_GLOBAL, ROLE_LOCAL, ROLE_SAMPLED, ROLE_CLUSTER = 0, 1, 2, 3
 _STATUS_OF_ROLE = {ROLE_GLOBAL: STATUS_TRAINING_GLOBAL, ROLE_LOCAL: STATUS_TRAINING_LOCAL,
                    ROLE_SAMPLED: STATUS_TRAINING, ROLE_CLUSTER: STATUS_TRAINING}
 

@@ -12,13 +12,14 @@ import os
 import sys
 from pathlib import Path
 
-from glocal_ros.bag_cli import add_bag_commands
-from glocal_ros.curriculum import STRATEGY_NAMES
+from glocal_app.bag_cli import add_bag_commands
+from glocal_app.nodes import NODES
+from glocal_ros.curriculum.codes import STRATEGY_NAMES
 from glocal_ros.paths import assets_dir, objects_dir
 from glocal_ros.tasks import parse_task_list, sorted_tasks
 
+#: The ament package that installs the nodes' executables.
 PACKAGE = "glocal_ros"
-NODES = ("sim_node", "learner_node", "curriculum_node", "recorder_node")
 
 
 def node_executable(node: str) -> Path:
@@ -45,7 +46,7 @@ def cmd_run(args: argparse.Namespace) -> int:
 
 
 def cmd_evaluate(args: argparse.Namespace) -> int:
-    from node_common.commands import evaluate_policy
+    from glocal_app.commands import evaluate_policy
 
     scores = evaluate_policy(args.policy, parse_task_list(args.tasks), args.episodes, args.seed, args.timeout)
     if args.json:
@@ -57,7 +58,7 @@ def cmd_evaluate(args: argparse.Namespace) -> int:
 
 
 def cmd_launch(args: argparse.Namespace) -> int:
-    from node_common.launch import launch
+    from glocal_app.launch import launch
 
     if args.watchdog is None:
         return launch(args.strategy, args.preset, args.seed, args.out)
@@ -67,7 +68,7 @@ def cmd_launch(args: argparse.Namespace) -> int:
 
 
 def cmd_experiment(args: argparse.Namespace) -> int:
-    from node_common.launch import experiment
+    from glocal_app.launch import experiment
 
     strategies = [s.strip() for s in args.strategies.split(",") if s.strip()]
     unknown = [s for s in strategies if s not in STRATEGY_NAMES]
@@ -129,7 +130,7 @@ def cmd_assets_show(args: argparse.Namespace) -> int:
 
 
 def cmd_bench_sim(args: argparse.Namespace) -> int:
-    from sim_node.bench import run_sim_bench, sim_bench_report
+    from glocal_app.benches.sim import run_sim_bench, sim_bench_report
 
     env_counts = [int(n) for n in args.envs.split(",")]
     rows = run_sim_bench(env_counts, args.batches, args.rounds)
@@ -142,7 +143,7 @@ def cmd_bench_sim(args: argparse.Namespace) -> int:
 
 
 def cmd_bench_learner(args: argparse.Namespace) -> int:
-    from learner_node.bench import learner_bench_report, run_learner_bench
+    from glocal_app.benches.learner import learner_bench_report, run_learner_bench
 
     env_counts = [int(n) for n in args.envs.split(",")]
     rows = run_learner_bench(env_counts, args.steps, args.rounds, learner_node=not args.no_learner_node)
@@ -155,7 +156,7 @@ def cmd_bench_learner(args: argparse.Namespace) -> int:
 
 
 def cmd_bench_graph(args: argparse.Namespace) -> int:
-    from curriculum_node.bench import graph_bench_report, run_graph_bench
+    from glocal_app.benches.graph import graph_bench_report, run_graph_bench
 
     if min(args.goals, args.evaluations, args.steps) < 1:
         raise ValueError("--goals, --evaluations and --steps must be at least 1")

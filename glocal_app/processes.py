@@ -34,7 +34,7 @@ class NodeProcess:
         self.node = node
         log_dir.mkdir(parents=True, exist_ok=True)
         self.log_path = log_dir / f"{node}-{time.strftime('%Y%m%d-%H%M%S')}-{time.monotonic_ns() % 10**6}.log"
-        command = [sys.executable, "-m", "glocal_ros.cli", "run", node, "--ros-args"]
+        command = [sys.executable, "-m", "glocal_app.cli", "run", node, "--ros-args"]
         if params_file is not None:
             command += ["--params-file", str(params_file)]
         for name, value in (params or {}).items():

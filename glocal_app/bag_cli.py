@@ -20,7 +20,8 @@ def cmd_replay(args: argparse.Namespace) -> int:
 
 def cmd_bag_check(args: argparse.Namespace) -> int:
     """Messages per topic and the episode sequence; exit code 1 when episodes are missing or repeated."""
-    from glocal_ros.recording import EPISODES_TOPIC, episode_sequence, message_counts
+    from glocal_ros.recording import episode_sequence, message_counts
+    from glocal_ros.topics import EPISODES_TOPIC
 
     counts = message_counts(args.bag)
     width = max((len(topic) for topic in counts), default=0)

@@ -45,11 +45,11 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Callable, Sequence
 
+from glocal_app.processes import NodeProcess, isolated_environment
 from glocal_ros.domain import reserve_domain_id
 from glocal_ros.paths import assets_dir
-from glocal_ros.processes import NodeProcess, isolated_environment
+from glocal_ros.sim_contract import BatchStepper
 from node_common.runner import spinning_node
-from learner_node.evaluation import BatchStepper
 from learner_node.policies import PolicyRegistry
 from learner_node.policy_store import PolicyStore
 from learner_node.sac_settings import SAC_KWARGS, TORCH_THREADS

@@ -35,12 +35,12 @@ from typing import Callable, Iterator, Sequence
 
 import numpy as np
 
+from glocal_app.processes import NodeProcess, isolated_environment
 from glocal_ros.domain import reserve_domain_id
-from glocal_ros.processes import NodeProcess, isolated_environment
+from glocal_ros.spaces import ACTION_DIM
 
 CALL_TIMEOUT_SEC = 60.0
 NUM_ENVS = 2
-ACTION_DIM = 5
 BURNER = "while True: pass"
 
 

@@ -38,10 +38,11 @@ import rclpy
 from glocal_interfaces.msg import CurriculumState, EpisodeRecord, TrainingProgress
 from glocal_interfaces.srv import ListPolicies
 
+from glocal_app.processes import NodeProcess, isolated_environment
 from glocal_ros.domain import reserve_domain_id
 from glocal_ros.paths import assets_dir
-from glocal_ros.processes import NodeProcess, isolated_environment
 from glocal_ros.recording import message_counts
+from glocal_ros.topics import EPISODES_TOPIC
 from node_common import names, qos
 
 STATUS_NAMES = {value: name.removeprefix("STATUS_").lower() for name, value in vars(CurriculumState).items()
@@ -238,7 +239,7 @@ def launch(strategy: str, preset: str, seed: int, run_dir: Path, startup_timeout
         start("sim_node", seed=seed)
         start("learner_node", seed=seed, policy_dir=str(run_dir / "policies"))
         deadline = time.monotonic() + startup_timeout
-        while node.count_subscribers("/" + names.EPISODES) < 1 or node.count_publishers("/" + names.EPISODES) < 1:
+        while node.count_subscribers(EPISODES_TOPIC) < 1 or node.count_publishers(EPISODES_TOPIC) < 1:
             rclpy.spin_once(node, timeout_sec=0.1)
             failed = [p for p in started if not p.running]
             if failed or time.monotonic() > deadline:

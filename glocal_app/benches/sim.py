@@ -23,8 +23,8 @@ from typing import Callable, Sequence
 
 import numpy as np
 
+from glocal_app.processes import NodeProcess, isolated_environment
 from glocal_ros.domain import reserve_domain_id
-from glocal_ros.processes import NodeProcess, isolated_environment
 from node_common.runner import spinning_node
 from sim_node.batch import BatchedEnvs
 from sim_node.grasp_env import GraspEnv

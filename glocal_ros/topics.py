@@ -1,0 +1,72 @@
+"""The graph's topics, one table: name, message type, QoS, recorded or not.
+
+Every node, the recorder, replay and the analysis read their topic names and
+QoS from here; ``node_common.qos`` turns each ``QosSpec`` into an rclpy
+``QoSProfile`` and ``node_common.names`` gives nodes the names relative to
+their namespace. ROS-free on purpose: QoS is plain data (reliability,
+durability, keep-last depth), so the recorder's bag metadata and the
+analysis need no ROS client.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+
+@dataclass(frozen=True)
+class QosSpec:
+    """A publisher's offered QoS; history is always keep-last ``depth``."""
+
+    reliable: bool  # else best effort
+    transient_local: bool  # else volatile
+    depth: int
+
+
+#: Every episode must reach the recorder: reliable, and a deep queue so that a
+#: burst of finished episodes (N envs ending together) is never dropped.
+EPISODES_QOS = QosSpec(reliable=True, transient_local=False, depth=1000)
+#: Curriculum state and assignments: a late joiner (viewer, recorder) gets the
+#: latest one at once.
+LATCHED_QOS = QosSpec(reliable=True, transient_local=True, depth=10)
+#: Reliable event streams that are not latched (evaluations, training progress).
+EVENTS_QOS = QosSpec(reliable=True, transient_local=False, depth=100)
+#: Throttled viewer streams (joint states, object pose, grasp state): a lost
+#: sample is replaced by the next one.
+VIEWER_QOS = QosSpec(reliable=False, transient_local=False, depth=5)
+
+
+@dataclass(frozen=True)
+class TopicSpec:
+    name: str  # absolute, as a root-namespace recorder subscribes and a bag stores it
+    msgtype: str  # e.g. glocal_interfaces/msg/EpisodeRecord
+    qos: QosSpec
+    recorded: bool  # written to the run's bag by recorder_node
+
+    @property
+    def relative_name(self) -> str:
+        """The name a node uses: it follows the node's namespace (several sim/learner pairs per domain)."""
+        return self.name.lstrip("/")
+
+
+EPISODES = TopicSpec("/glocal/episodes", "glocal_interfaces/msg/EpisodeRecord", EPISODES_QOS, recorded=True)
+CURRICULUM_STATE = TopicSpec("/glocal/curriculum_state", "glocal_interfaces/msg/CurriculumState", LATCHED_QOS,
+                             recorded=True)
+TASK_ASSIGNMENT = TopicSpec("/glocal/task_assignment", "glocal_interfaces/msg/TaskAssignment", LATCHED_QOS,
+                            recorded=True)
+TRAINING_PROGRESS = TopicSpec("/glocal/training_progress", "glocal_interfaces/msg/TrainingProgress", EVENTS_QOS,
+                              recorded=True)
+EVALUATIONS = TopicSpec("/glocal/evaluations", "glocal_interfaces/msg/EvaluationResult", EVENTS_QOS, recorded=True)
+JOINT_STATES = TopicSpec("/joint_states", "sensor_msgs/msg/JointState", VIEWER_QOS, recorded=True)
+OBJECT_POSE = TopicSpec("/glocal/object_pose", "geometry_msgs/msg/PoseStamped", VIEWER_QOS, recorded=True)
+GRASP_STATE = TopicSpec("/glocal/grasp_state", "glocal_interfaces/msg/GraspState", VIEWER_QOS, recorded=True)
+
+#: Every topic of the graph, with the QoS its publisher offers.
+GRAPH_TOPICS: tuple[TopicSpec, ...] = (
+    EPISODES, CURRICULUM_STATE, TASK_ASSIGNMENT, TRAINING_PROGRESS, EVALUATIONS, JOINT_STATES, OBJECT_POSE,
+    GRASP_STATE,
+)
+#: What recorder_node writes to a run's bag.
+RECORDED_TOPICS: tuple[TopicSpec, ...] = tuple(topic for topic in GRAPH_TOPICS if topic.recorded)
+
+#: The topic whose EpisodeRecord.seq counts a sim node's episodes from 0 without gaps.
+EPISODES_TOPIC = EPISODES.name
