@@ -98,8 +98,9 @@ class RosLearner:
     def train(self, request: TrainRequest) -> TrainResult:
         goal = Train.Goal(
             task=request.task, episode_tasks=list(request.episode_tasks), initial_policy=request.initial_policy,
-            output_policy=request.output_policy, step_budget=request.step_budget, threshold=request.threshold,
-            eval_episodes=request.eval_episodes, eval_interval=request.eval_interval,
+            output_policy=request.output_policy, step_budget=request.step_budget,
+            threshold=-1.0 if request.threshold is None else float(request.threshold),
+            eval_episodes=request.eval_episodes or 0, eval_interval=request.eval_interval,
             stop_when_learned=request.stop_when_learned, keep_replay_buffer=request.keep_replay_buffer,
             seed=-1 if request.seed is None else request.seed,
         )

@@ -15,6 +15,7 @@ from pathlib import Path
 from glocal_app.bag_cli import add_bag_commands
 from glocal_app.nodes import NODES
 from glocal_ros.curriculum.codes import STRATEGY_NAMES
+from glocal_ros.curriculum.learner import passes_threshold
 from glocal_ros.paths import assets_dir, objects_dir
 from glocal_ros.tasks import parse_task_list, sorted_tasks
 
@@ -204,7 +205,7 @@ def cmd_train_prior(args: argparse.Namespace) -> int:
                                  "seed": config.seed})
     PolicyStore(args.out).save(model, record)
     print(f"stored in {args.out}/prior")
-    return 0 if score.successes > args.threshold else 1
+    return 0 if passes_threshold(score.successes, args.threshold) else 1
 
 
 def build_parser() -> argparse.ArgumentParser:

@@ -186,7 +186,8 @@ class LearnerNode(Node):
             spec = TrainSpec(
                 task=goal.task, episode_tasks=tuple(goal.episode_tasks), initial_policy=goal.initial_policy,
                 output_policy=goal.output_policy, step_budget=goal.step_budget,
-                threshold=goal.threshold or DEFAULT_THRESHOLD_FRACTION * eval_episodes, eval_episodes=eval_episodes,
+                threshold=goal.threshold if goal.threshold >= 0 else DEFAULT_THRESHOLD_FRACTION * eval_episodes,
+                eval_episodes=eval_episodes,
                 eval_interval=goal.eval_interval, stop_when_learned=goal.stop_when_learned,
                 keep_replay_buffer=goal.keep_replay_buffer, seed=None if goal.seed < 0 else goal.seed,
             )

@@ -47,7 +47,7 @@ from typing import Callable
 
 import numpy as np
 
-from glocal_ros.curriculum.learner import EpisodeSummary
+from glocal_ros.curriculum.learner import EpisodeSummary, passes_threshold
 from glocal_ros.files import atomic_write
 from glocal_ros.seeds import MAX_SEED, derived_seed
 from glocal_ros.sim_contract import BatchStepper
@@ -383,7 +383,7 @@ class Trainer:
                             spec.eval_episodes, policy_name=spec.output_policy, seed=seed,
                             global_step=self.total_steps)
         state.score = asdict(score)
-        state.learned = score.successes > spec.threshold
+        state.learned = passes_threshold(score.successes, spec.threshold)
         state.steps_at_last_eval = steps
         on_evaluation(score)
 

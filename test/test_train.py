@@ -341,6 +341,17 @@ def test_a_goal_that_stops_when_learned_stops_at_the_evaluation_that_passed(grap
     assert f"learned after {result.steps_used} steps" in result.message
 
 
+@pytest.mark.parametrize("graph", [GRASPING_SIM], indirect=True)
+def test_a_threshold_of_zero_is_honoured(graph):
+    """B = 0 (learned from one success on) was taken for "unset" and judged at 0.75 x S-bar instead."""
+    status, result = Goal(graph["train"], train_goal(step_budget=2, threshold=0.0, eval_episodes=4)).result(
+        120, processes=[graph["learner"]])
+    assert status == GoalStatus.STATUS_SUCCEEDED, result.message
+    assert result.learned == (result.score.successes > 0), result
+    stored = json.loads((graph["policy_dir"] / "trained" / "policy.json").read_text())
+    assert stored["extra"]["threshold"] == 0.0, stored
+
+
 def test_a_policy_that_passes_already_is_stored_without_training(tmp_path):
     """In-process (T = 50, where the prior grasps A0): the check before the first step."""
     from glocal_ros.paths import assets_dir

@@ -26,7 +26,7 @@ from typing import Protocol
 import numpy as np
 
 from glocal_ros.curriculum.alp_gmm import AlpGmmSampler
-from glocal_ros.curriculum.learner import TrainRequest
+from glocal_ros.curriculum.learner import TrainRequest, passes_threshold
 from glocal_ros.curriculum.codes import ROLE_SAMPLED
 from glocal_ros.curriculum.run import Run
 
@@ -70,8 +70,7 @@ def run_sampled(run: Run, sampler: TaskSampler, chunk_episodes: int, max_episode
         tasks = tuple(sampler.sample() for _ in range(chunk_episodes))
         result = run.train(ROLE_SAMPLED, TrainRequest(
             task="", episode_tasks=tasks, initial_policy=initial, output_policy=policy,
-            step_budget=chunk_episodes * max_episode_steps, threshold=config.threshold,
-            eval_episodes=config.eval_episodes, stop_when_learned=False, keep_replay_buffer=True,
+            step_budget=chunk_episodes * max_episode_steps, stop_when_learned=False, keep_replay_buffer=True,
         ))
         initial = policy
         run.set_current_policy(policy)
@@ -87,7 +86,7 @@ def _save_passing_tasks(run: Run, policy: str) -> None:
     """The fairness rule: a copy of the policy for each unlearned task whose score passes B."""
     remaining = list(run.state.remaining_tasks)
     for task, score in run.evaluate(policy, remaining).items():
-        if score > run.config.threshold:
+        if passes_threshold(score, run.config.threshold):
             copy = run.config.policy_name(task)
             run.learner.copy(policy, copy)
             run.mark_learned(task, copy)

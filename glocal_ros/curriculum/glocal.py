@@ -35,7 +35,7 @@ from __future__ import annotations
 import numpy as np
 
 from glocal_ros.clustering import cluster_tasks, split_global_local
-from glocal_ros.curriculum.learner import TrainRequest
+from glocal_ros.curriculum.learner import TrainRequest, passes_threshold
 from glocal_ros.curriculum.codes import ROLE_CLUSTER, ROLE_GLOBAL, ROLE_LOCAL
 from glocal_ros.curriculum.run import Run
 
@@ -86,8 +86,7 @@ def _train_task(run: Run, role: int, task: str, initial: str, output: str) -> bo
     config = run.config
     result = run.train(role, TrainRequest(
         task=task, initial_policy=initial, output_policy=output, step_budget=config.task_step_budget,
-        threshold=config.threshold, eval_episodes=config.eval_episodes, eval_interval=config.eval_interval,
-        stop_when_learned=True,
+        eval_interval=config.eval_interval, stop_when_learned=True,
     ))
     if result.learned:
         run.mark_learned(task, output)
@@ -100,10 +99,9 @@ def _train_cluster(run: Run, initial: str, tasks: list[str], iteration: int) -> 
     output = config.policy_name(f"C{iteration}")
     run.train(ROLE_CLUSTER, TrainRequest(
         task="", episode_tasks=tuple(tasks), initial_policy=initial, output_policy=output,
-        step_budget=config.task_step_budget * len(tasks), threshold=config.threshold,
-        eval_episodes=config.eval_episodes, stop_when_learned=False,
+        step_budget=config.task_step_budget * len(tasks), stop_when_learned=False,
     ))
     for task, score in run.evaluate(output, tasks).items():
-        if score > config.threshold:
+        if passes_threshold(score, config.threshold):
             run.mark_learned(task, output)
     return output

@@ -14,13 +14,18 @@ class TrainRequest:
     initial_policy: str
     output_policy: str
     step_budget: int
-    threshold: float  # B: learned when the score is above it
-    eval_episodes: int  # S-bar
+    threshold: float | None = None  # B: learned when the score is above it; None: the run's (``Run.train``)
+    eval_episodes: int | None = None  # S-bar; None: the run's
     episode_tasks: tuple[str, ...] = ()  # tasks of successive episodes; () trains ``task``
     eval_interval: int = 0  # env steps between evaluations of ``task``; 0: at the end only
     stop_when_learned: bool = True
     keep_replay_buffer: bool = False
     seed: int | None = None  # None: the learner's own random streams; else the goal is repeatable
+
+
+def passes_threshold(score: float, threshold: float) -> bool:
+    """The paper's "learned": a score (successes out of S-bar) above B. The one place that decides it."""
+    return score > threshold
 
 
 @dataclass(frozen=True)

@@ -150,7 +150,7 @@ class Run:
         return self.learner.evaluate(policy, tasks, self.config.eval_episodes)
 
     def train(self, role: int, request: TrainRequest) -> TrainResult:
-        """Run one goal, its budget clipped to what the run has left."""
+        """Run one goal, its budget clipped to what the run has left, judged by the run's B and S-bar."""
         request = replace(request, step_budget=min(request.step_budget, self.steps_left),
                           threshold=self.config.threshold, eval_episodes=self.config.eval_episodes)
         self.observer.assigned(Assignment(self._assignments, self.state.iteration, role, request.task,
