@@ -91,7 +91,7 @@ class RosLearner:
             self._call(self._copy, CopyPolicy.Request(source=source, destination=destination))
         except ServiceCallError as error:
             # Copied just before this node was killed, before the journal had it.
-            if "exists already" not in str(error):
+            if error.response is None or error.response.error != CopyPolicy.Response.ERROR_EXISTS:
                 raise
             self.node.get_logger().info(f"{destination} exists already: kept")
 

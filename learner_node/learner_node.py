@@ -41,7 +41,7 @@ from rclpy.node import Node
 from glocal_ros.paths import assets_dir, ros_home
 from glocal_ros.tasks import validate_tasks
 from learner_node.evaluation import evaluate
-from learner_node.policies import PolicyRegistry
+from learner_node.policies import PolicyExists, PolicyRegistry
 from learner_node.policy_store import PolicyStore
 from learner_node.sim_client import SimClient
 from learner_node.training import (DEFAULT_EVAL_EPISODES, DEFAULT_MAX_STEP_BUDGET, DEFAULT_THRESHOLD_FRACTION,
@@ -49,7 +49,7 @@ from learner_node.training import (DEFAULT_EVAL_EPISODES, DEFAULT_MAX_STEP_BUDGE
 from node_common import names, qos
 from node_common.params import declare
 from node_common.runner import spin_node
-from node_common.services import answers_errors
+from node_common.services import REFUSED, answers_errors
 
 JOB_POLL_SEC = 0.02
 CLOSE_TIMEOUT_SEC = 10.0
@@ -284,7 +284,9 @@ class LearnerNode(Node):
         ]
         return response
 
-    @answers_errors("copy_policy")
+    @answers_errors("copy_policy", {PolicyExists: CopyPolicy.Response.ERROR_EXISTS,
+                                    REFUSED: CopyPolicy.Response.ERROR_REFUSED,
+                                    Exception: CopyPolicy.Response.ERROR_INTERNAL})
     def on_copy_policy(self, request: CopyPolicy.Request, response: CopyPolicy.Response) -> CopyPolicy.Response:
         self.policies.copy(request.source, request.destination)
         response.success = True

@@ -21,6 +21,10 @@ from learner_node.policy_store import PolicyRecord, PolicyStore, UnknownPolicyEr
 RANDOM_POLICY = "random"
 
 
+class PolicyExists(ValueError):
+    """A policy of that name exists already: nothing was written."""
+
+
 class PolicyRegistry:
     def __init__(self, store: PolicyStore, read_only: Sequence[PolicyStore] = (), seed: int | None = None):
         self.store = store
@@ -75,7 +79,7 @@ class PolicyRegistry:
     def copy(self, source: str, destination: str) -> PolicyRecord:
         """Copy a stored policy into the learner's own store under a new name."""
         if destination == RANDOM_POLICY or destination in self.names():
-            raise ValueError(f"policy {destination!r} exists already")
+            raise PolicyExists(f"policy {destination!r} exists already")
         if source == RANDOM_POLICY:
             raise ValueError(f"{RANDOM_POLICY!r} is built in and has no model to copy")
         return self.store.add_copy(self._store_of(source), source, destination)

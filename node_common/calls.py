@@ -24,7 +24,11 @@ WATCH_INTERVAL_SEC = 1.0
 
 
 class ServiceCallError(RuntimeError):
-    """The service is missing, did not answer in time, or answered an error."""
+    """The service is missing, did not answer in time, or answered an error (then ``response`` is it)."""
+
+    def __init__(self, message: str, response: Any = None):
+        super().__init__(message)
+        self.response = response
 
 
 class ServerGone(ServiceCallError):
@@ -93,7 +97,7 @@ def start_call(client: Client, request: Any, timeout_sec: float = 60.0, checked:
             raise ServiceCallError(f"service {client.srv_name} failed: {future.exception()}")
         response = future.result()
         if checked and not response.success:
-            raise ServiceCallError(f"{client.srv_name}: {response.message}")
+            raise ServiceCallError(f"{client.srv_name}: {response.message}", response)
         return response
 
     return wait

@@ -80,13 +80,16 @@ def test_bad_evaluate_is_answered_and_the_node_keeps_serving(learner, request_fi
 def test_copy_policy_into_the_store(learner, ros_node, policy_dir):
     process, evaluate = learner
     copy = ros_node.create_client(CopyPolicy, names.LEARNER_COPY_POLICY)
-    assert call(copy, CopyPolicy.Request(source="prior", destination="A0_learned")).success
+    response = call(copy, CopyPolicy.Request(source="prior", destination="A0_learned"))
+    assert response.success and response.error == CopyPolicy.Response.ERROR_NONE
     assert (policy_dir / "A0_learned" / "policy.json").is_file()
-    for source, destination, message in [("prior", "A0_learned", "exists already"),
-                                         ("nope", "x", "unknown policy 'nope'"),
-                                         ("random", "r2", "built in"),
-                                         ("prior", "../x", "invalid policy name")]:
+    exists, refused = CopyPolicy.Response.ERROR_EXISTS, CopyPolicy.Response.ERROR_REFUSED
+    for source, destination, message, kind in [("prior", "A0_learned", "exists already", exists),
+                                               ("nope", "x", "unknown policy 'nope'", refused),
+                                               ("random", "r2", "built in", refused),
+                                               ("prior", "../x", "invalid policy name", refused)]:
         response = call(copy, CopyPolicy.Request(source=source, destination=destination))
         assert not response.success and message in response.message
+        assert response.error == kind, (source, destination, response.error)
     response = call(evaluate, Evaluate.Request(policy="A0_learned", tasks=["A0"], episodes=2, seed=1))
     assert response.success and process.process.poll() is None

@@ -335,25 +335,40 @@ def _messages(bag: Path, topics: Sequence[str], counts: dict[str, int]) -> Itera
 
     Fills ``counts`` with the messages per topic of the whole bag (from its
     metadata) on opening. Falls back to glocal_interfaces' current definitions
-    when the embedded ones cannot be used (none embedded, or a hash that does
-    not match them).
+    when rosbags cannot open the bag with the embedded ones (none embedded, or
+    a hash that does not match them); when the fallback cannot open it either,
+    the first error is the one raised. Errors while reading are not caught.
     """
+    reader = AnyReader([bag], default_typestore=_fallback_typestore())
     try:
-        with AnyReader([bag], default_typestore=_fallback_typestore()) as reader:
-            counts.update({c.topic: c.msgcount for c in reader.connections})
-            connections = [c for c in reader.connections if c.topic in topics]
-            for connection, log_time, raw in reader.messages(connections=connections):
-                yield connection.topic, log_time, reader.deserialize(raw, connection.msgtype)
-        return
+        reader.open()
     except AnyReaderError as error:
-        if "hash mismatch" not in str(error) and "no type definitions" not in str(error):
-            raise
+        yield from _messages_with_current_definitions(bag, topics, counts, error)
+        return
+    try:
+        counts.update({c.topic: c.msgcount for c in reader.connections})
+        connections = [c for c in reader.connections if c.topic in topics]
+        for connection, log_time, raw in reader.messages(connections=connections):
+            yield connection.topic, log_time, reader.deserialize(raw, connection.msgtype)
+    finally:
+        reader.close()
+
+
+def _messages_with_current_definitions(bag: Path, topics: Sequence[str], counts: dict[str, int],
+                                       first_error: Exception) -> Iterator[tuple[str, int, object]]:
     typestore = _fallback_typestore()
-    with Reader(bag) as reader:
+    try:
+        reader = Reader(bag)
+        reader.open()
+    except Exception as error:  # noqa: BLE001 - the first error says what is wrong with the bag
+        raise first_error from error
+    try:
         counts.update({c.topic: c.msgcount for c in reader.connections})
         connections = [c for c in reader.connections if c.topic in topics]
         for connection, log_time, raw in reader.messages(connections=connections):
             yield connection.topic, log_time, typestore.deserialize_cdr(raw, connection.msgtype)
+    finally:
+        reader.close()
 
 
 def read_bag(bag: Path, count_episodes: bool = True) -> BagContents:
