@@ -5,7 +5,8 @@ client, or ``BatchedEnvs`` in-process for the bench and tests), and the goal's
 owner passes in what it needs to hear (progress), to say (stop) and to run
 between steps (evaluations others asked for).
 
-The loop is stable-baselines3's ``learn`` on a ``BatchVecEnv``; around it:
+The loop is stable-baselines3's ``learn`` on a ``BatchVecEnv`` (``_Goal`` writes down the
+order of one step); around it:
 - evaluation of ``task`` every ``eval_interval`` env steps and at the end,
   the paper's score (successes out of ``eval_episodes``, deterministic);
   learned means score > threshold (the paper's "above B"); a goal that
@@ -46,6 +47,7 @@ from pathlib import Path
 from typing import Callable
 
 import numpy as np
+from stable_baselines3.common.callbacks import BaseCallback
 
 from glocal_ros.curriculum.learner import EpisodeSummary, passes_threshold
 from glocal_ros.files import atomic_write
@@ -182,107 +184,12 @@ class Trainer:
         goal's decisions were based on.
         """
         import torch
-        from stable_baselines3.common.callbacks import BaseCallback
 
         torch.set_num_threads(TORCH_THREADS)
-        checkpoint_dir = self.checkpoint_root / spec.output_policy
-        finished = self._finished_before(spec, checkpoint_dir)
+        finished = self._finished_before(spec, self.checkpoint_root / spec.output_policy)
         if finished is not None:
             return finished
-        state = _GoalState()
-
-        def between() -> bool:
-            used = between_steps()
-            # This step's count: SB3 adds the step to num_timesteps after it returns. Evaluating
-            # here, not in the callback that follows, scores the policy at exactly the interval
-            # (SB3's callback would see the same model: updates through the step before), and a
-            # goal that then stops has steps_used equal to the evaluation's step, so the end
-            # does not evaluate it again (a second score could undo "learned").
-            steps = model.num_timesteps + vec_env.num_envs - goal_start_timesteps
-            if spec.task and spec.eval_interval and steps - state.steps_at_last_eval >= spec.eval_interval:
-                updates.pay()
-                self._evaluate_task(model, spec, state, steps, on_evaluation)
-                used = True
-            return used
-
-        cycle = TaskCycle(spec.episode_tasks or (spec.task,))
-        vec_env = BatchVecEnv(self.envs, *self._spaces(spec), cycle, policy_name=spec.output_policy,
-                              global_step=lambda: self.total_steps, between_steps=between)
-        model, resumed = self._model(spec, vec_env, checkpoint_dir, state, cycle)
-        self._seeded(spec, model, vec_env, resumed)
-        for key in SCHEDULE_KEYS:
-            setattr(model, key, SAC_KWARGS[key])
-        updates = OverlappedUpdates(model)
-        vec_env.while_stepping = updates.pay
-        if spec.stop_when_learned and spec.task and state.score is None:
-            # "Train until S > B" checks first: a policy that passes already is not trained.
-            self._evaluate_task(model, spec, state, state.steps_used, on_evaluation)
-        recent = deque(maxlen=50)
-        started, stop_reason = time.monotonic(), ""
-        goal_start_timesteps = model.num_timesteps - state.steps_used
-        last = {"progress": 0.0, "checkpoint": state.steps_used}
-        trainer = self
-
-        class GoalCallback(BaseCallback):
-            def _on_rollout_start(self) -> None:
-                # Before the vector step's actions are drawn: the last step's transition is in the
-                # buffer, so a checkpoint here holds everything the next step depends on.
-                steps = self.model.num_timesteps - goal_start_timesteps
-                if steps - last["checkpoint"] >= trainer.checkpoint_interval:
-                    last["checkpoint"] = steps
-                    with updates.settled():
-                        trainer._save_checkpoint(checkpoint_dir, spec, self.model, state, cycle)
-                    trainer._cut_episodes(spec, self.model, vec_env, steps)
-
-            def _on_step(self) -> bool:
-                nonlocal stop_reason
-                steps = self.model.num_timesteps - goal_start_timesteps
-                trainer.total_steps += vec_env.num_envs
-                state.steps_used = steps
-                while vec_env.finished:
-                    episode = vec_env.finished.popleft()
-                    state.episodes.append(asdict(episode))
-                    recent.append(episode.success)
-                now = time.monotonic()
-                if now - last["progress"] >= trainer.progress_interval_sec:
-                    last["progress"] = now
-                    on_progress(TrainProgress(steps, spec.step_budget, len(state.episodes),
-                                              float(np.mean(recent)) if recent else 0.0,
-                                              state.score["successes"] if state.score else -1.0,
-                                              (steps - resumed) / max(now - started, 1e-9)))
-                stop_reason = should_stop()
-                keep_going = not stop_reason and not (spec.stop_when_learned and state.learned)
-                if keep_going:  # SB3 skips the updates of the step that stops it
-                    updates.owe(vec_env.num_envs)
-                return keep_going
-
-        remaining = spec.step_budget - state.steps_used
-        if remaining > 0 and not (spec.stop_when_learned and state.learned):
-            try:
-                with updates:
-                    model.learn(remaining, callback=GoalCallback(), reset_num_timesteps=False, progress_bar=False)
-            except BaseException as error:
-                # The sim went away, or the process is stopping: keep what was trained.
-                if state.steps_used > last["checkpoint"]:
-                    self._save_checkpoint(checkpoint_dir, spec, model, state, cycle)
-                    last["checkpoint"] = state.steps_used
-                self._warm = None
-                if isinstance(error, Exception):
-                    raise GoalFailed(error, state.steps_used, last["checkpoint"]) from error
-                raise
-        if stop_reason:
-            self._save_checkpoint(checkpoint_dir, spec, model, state, cycle)
-            self._warm = None
-            return self._outcome(state, False, f"stopped after {state.steps_used} steps: {stop_reason}")
-        if spec.task and (state.score is None or state.steps_at_last_eval != state.steps_used):
-            self._evaluate_task(model, spec, state, state.steps_used, on_evaluation)
-        stored = self._store(spec, model, state)
-        verdict = ("learned" if state.learned else "not learned") if spec.task else "trained"
-        message = f"{verdict} after {state.steps_used} steps"
-        if resumed:
-            message += f" (resumed from a checkpoint at step {resumed})"
-        self._mark_finished(checkpoint_dir, spec, state, stored.model_file)
-        return self._outcome(state, True, message)
+        return _Goal(self, spec, on_progress, should_stop, between_steps, on_evaluation).run()
 
     def _mark_finished(self, folder: Path, spec: TrainSpec, state: _GoalState, model_file: str) -> None:
         """Replace the checkpoint by the goal's outcome: a client that lost the result may ask again."""
@@ -421,6 +328,157 @@ class Trainer:
         score = Score(**state.score) if state.score else None
         return TrainOutcome(state.learned, score, state.steps_used,
                             [EpisodeSummary(**e) for e in state.episodes], message, completed)
+
+
+
+class _Goal:
+    """One Train goal from its first step to its outcome: the state it owns and the order of a step.
+
+    The loop is SB3's ``learn``; each vector step runs, in this order:
+    1. ``at_step_start`` (SB3's rollout start): when a checkpoint is due, the
+       owed gradient steps are paid, the checkpoint written, and the running
+       episodes cut (``Trainer._cut_episodes``).
+    2. SB3 draws the N actions.
+    3. ``BatchVecEnv.step_wait`` sends them; while the sim computes the step,
+       the previous step's gradient steps are paid (``OverlappedUpdates``);
+       with the step back, ``between_steps`` runs the owner's jobs and, when
+       due, the interval evaluation.
+    4. ``after_step`` (SB3's callback, before SB3 stores the transition):
+       counts, finished episodes, progress, the stop check, and this step's
+       gradient steps owed.
+    5. SB3 stores the transition.
+    At the end: the last evaluation (unless one ran at that very step), the
+    policy stored, the outcome kept for a client that asks again.
+    """
+
+    def __init__(self, trainer: "Trainer", spec: TrainSpec, on_progress: Callable[[TrainProgress], None],
+                 should_stop: Callable[[], str], between_steps: Callable[[], bool],
+                 on_evaluation: Callable[[Score], None]):
+        self.trainer, self.spec = trainer, spec
+        self.on_progress, self.should_stop, self.owner_between_steps = on_progress, should_stop, between_steps
+        self.on_evaluation = on_evaluation
+        self.checkpoint_dir = trainer.checkpoint_root / spec.output_policy
+        self.state = _GoalState()
+        self.cycle = TaskCycle(spec.episode_tasks or (spec.task,))
+        self.vec_env = BatchVecEnv(trainer.envs, *trainer._spaces(spec), self.cycle, policy_name=spec.output_policy,
+                                   global_step=lambda: trainer.total_steps, between_steps=self.between_steps)
+        self.model, self.resumed = trainer._model(spec, self.vec_env, self.checkpoint_dir, self.state, self.cycle)
+        trainer._seeded(spec, self.model, self.vec_env, self.resumed)
+        for key in SCHEDULE_KEYS:
+            setattr(self.model, key, SAC_KWARGS[key])
+        self.updates = OverlappedUpdates(self.model)
+        self.vec_env.while_stepping = self.updates.pay
+        self.start_timesteps = self.model.num_timesteps - self.state.steps_used  # the model's count at step 0
+        self.last_checkpoint = self.state.steps_used
+        self.last_progress = 0.0
+        self.started = time.monotonic()
+        self.recent: deque[bool] = deque(maxlen=50)  # successes of the last episodes, for progress
+        self.stop_reason = ""
+
+    @property
+    def steps(self) -> int:
+        """The goal's training env steps so far (SB3 counts a vector step once it is back)."""
+        return self.model.num_timesteps - self.start_timesteps
+
+    def run(self) -> TrainOutcome:
+        spec, state, trainer = self.spec, self.state, self.trainer
+        if spec.stop_when_learned and spec.task and state.score is None:
+            # "Train until S > B" checks first: a policy that passes already is not trained.
+            self.evaluate(state.steps_used)
+        remaining = spec.step_budget - state.steps_used
+        if remaining > 0 and not (spec.stop_when_learned and state.learned):
+            try:
+                with self.updates:
+                    self.model.learn(remaining, callback=_StepCallback(self), reset_num_timesteps=False,
+                                     progress_bar=False)
+            except BaseException as error:
+                # The sim went away, or the process is stopping: keep what was trained.
+                if state.steps_used > self.last_checkpoint:
+                    self.save_checkpoint()
+                trainer._warm = None
+                if isinstance(error, Exception):
+                    raise GoalFailed(error, state.steps_used, self.last_checkpoint) from error
+                raise
+        if self.stop_reason:
+            self.save_checkpoint()
+            trainer._warm = None
+            return trainer._outcome(state, False, f"stopped after {state.steps_used} steps: {self.stop_reason}")
+        if spec.task and (state.score is None or state.steps_at_last_eval != state.steps_used):
+            self.evaluate(state.steps_used)
+        stored = trainer._store(spec, self.model, state)
+        verdict = ("learned" if state.learned else "not learned") if spec.task else "trained"
+        message = f"{verdict} after {state.steps_used} steps"
+        if self.resumed:
+            message += f" (resumed from a checkpoint at step {self.resumed})"
+        trainer._mark_finished(self.checkpoint_dir, spec, state, stored.model_file)
+        return trainer._outcome(state, True, message)
+
+    def at_step_start(self) -> None:
+        """Step 1: before the actions are drawn, the last step's transition is in the buffer, so a
+        checkpoint here holds everything the next step depends on."""
+        if self.steps - self.last_checkpoint >= self.trainer.checkpoint_interval:
+            with self.updates.settled():
+                self.save_checkpoint()
+            self.trainer._cut_episodes(self.spec, self.model, self.vec_env, self.steps)
+
+    def between_steps(self) -> bool:
+        """Step 3, with the step back: True when the envs were used (their episodes are gone)."""
+        used = self.owner_between_steps()
+        # This step's count: SB3 adds the step to num_timesteps after it returns. Evaluating
+        # here, not in the callback that follows, scores the policy at exactly the interval
+        # (SB3's callback would see the same model: updates through the step before), and a
+        # goal that then stops has steps_used equal to the evaluation's step, so the end
+        # does not evaluate it again (a second score could undo "learned").
+        steps = self.steps + self.vec_env.num_envs
+        spec = self.spec
+        if spec.task and spec.eval_interval and steps - self.state.steps_at_last_eval >= spec.eval_interval:
+            self.updates.pay()
+            self.evaluate(steps)
+            used = True
+        return used
+
+    def after_step(self) -> bool:
+        """Step 4: False ends the goal."""
+        spec, state, steps = self.spec, self.state, self.steps
+        self.trainer.total_steps += self.vec_env.num_envs
+        state.steps_used = steps
+        while self.vec_env.finished:
+            episode = self.vec_env.finished.popleft()
+            state.episodes.append(asdict(episode))
+            self.recent.append(episode.success)
+        now = time.monotonic()
+        if now - self.last_progress >= self.trainer.progress_interval_sec:
+            self.last_progress = now
+            self.on_progress(TrainProgress(steps, spec.step_budget, len(state.episodes),
+                                           float(np.mean(self.recent)) if self.recent else 0.0,
+                                           state.score["successes"] if state.score else -1.0,
+                                           (steps - self.resumed) / max(now - self.started, 1e-9)))
+        self.stop_reason = self.should_stop()
+        keep_going = not self.stop_reason and not (spec.stop_when_learned and state.learned)
+        if keep_going:  # SB3 skips the updates of the step that stops it
+            self.updates.owe(self.vec_env.num_envs)
+        return keep_going
+
+    def evaluate(self, steps: int) -> None:
+        self.trainer._evaluate_task(self.model, self.spec, self.state, steps, self.on_evaluation)
+
+    def save_checkpoint(self) -> None:
+        self.trainer._save_checkpoint(self.checkpoint_dir, self.spec, self.model, self.state, self.cycle)
+        self.last_checkpoint = self.state.steps_used
+
+
+class _StepCallback(BaseCallback):
+    """SB3's hooks into a ``_Goal``: steps 1 and 4 of its order."""
+
+    def __init__(self, goal: _Goal):
+        super().__init__()
+        self.goal = goal
+
+    def _on_rollout_start(self) -> None:
+        self.goal.at_step_start()
+
+    def _on_step(self) -> bool:
+        return self.goal.after_step()
 
 
 def random_state(model) -> dict:
