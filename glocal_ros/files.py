@@ -9,8 +9,16 @@ from typing import BinaryIO, Callable
 
 
 def atomic_write(path: Path, write: Callable[[BinaryIO], object]) -> None:
-    """Write ``path`` through ``write(stream)`` on a temporary file, fsync, then an atomic rename."""
-    handle, temporary = tempfile.mkstemp(dir=path.parent, prefix=f".{path.name}.")
+    """Write ``path`` through ``write(stream)`` on a temporary file, fsync, then an atomic rename.
+
+    An ``OSError`` (a full disk) names ``path``: the errors of a write through a
+    stream (zip, numpy) name no file, and "No space left on device" alone does
+    not say which store filled up.
+    """
+    try:
+        handle, temporary = tempfile.mkstemp(dir=path.parent, prefix=f".{path.name}.")
+    except OSError as error:
+        raise _naming(error, path) from error
     os.fchmod(handle, 0o644)  # mkstemp's 0600 would hide shared or committed files from others
     try:
         with os.fdopen(handle, "wb") as stream:
@@ -18,6 +26,14 @@ def atomic_write(path: Path, write: Callable[[BinaryIO], object]) -> None:
             stream.flush()
             os.fsync(stream.fileno())
         os.replace(temporary, path)
-    except BaseException:
+    except BaseException as error:
         Path(temporary).unlink(missing_ok=True)
+        if isinstance(error, OSError) and str(path) not in str(error):
+            raise _naming(error, path) from error
         raise
+
+
+def _naming(error: OSError, path: Path) -> OSError:
+    """``error`` again (its built-in class: FileNotFoundError stays one), its message naming ``path``."""
+    kind = type(error) if type(error).__module__ == "builtins" else OSError
+    return kind(error.errno, f"cannot write {path}: {error.strerror or error}")

@@ -81,3 +81,28 @@ def test_a_kill_during_save_never_corrupts_the_store(tmp_path, model):
     assert result.returncode == -9
     assert store.record("P").steps_trained == 1
     store.load("P")  # still the complete first model
+
+
+# Saves a policy in a process whose files may not grow past 200 kB, as a full disk stops them.
+_SAVE_WITHOUT_ROOM = """
+import resource, sys
+from pathlib import Path
+from glocal_ros.files import atomic_write
+resource.setrlimit(resource.RLIMIT_FSIZE, (200_000, 200_000))
+try:
+    atomic_write(Path(sys.argv[1]), lambda stream: stream.write(bytes(1_000_000)))
+except OSError as error:
+    print(error)
+"""
+
+
+def test_a_write_that_fails_for_room_names_the_file_and_leaves_nothing(tmp_path):
+    import subprocess
+    import sys
+
+    target = tmp_path / "L1" / "model-2.zip"
+    target.parent.mkdir()
+    result = subprocess.run([sys.executable, "-c", _SAVE_WITHOUT_ROOM, str(target)], capture_output=True, text=True,
+                            timeout=120, check=True)
+    assert f"cannot write {target}: File too large" in result.stdout, result.stdout + result.stderr
+    assert list(target.parent.iterdir()) == []  # no temporary file left
