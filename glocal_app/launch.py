@@ -37,6 +37,7 @@ from typing import Sequence
 import rclpy
 from glocal_interfaces.msg import CurriculumState, EpisodeRecord, TrainingProgress
 from glocal_interfaces.srv import ListPolicies
+from rclpy.signals import SignalHandlerOptions
 
 from glocal_app.processes import NodeProcess, isolated_environment
 from glocal_ros.domain import reserve_domain_id
@@ -44,6 +45,7 @@ from glocal_ros.paths import assets_dir
 from glocal_ros.recording import message_counts
 from glocal_ros.topics import EPISODES_TOPIC
 from node_common import names, qos
+from node_common.runner import configure_discovery
 
 STATUS_NAMES = {value: name.removeprefix("STATUS_").lower() for name, value in vars(CurriculumState).items()
                 if name.startswith("STATUS_")}
@@ -212,7 +214,12 @@ def launch(strategy: str, preset: str, seed: int, run_dir: Path, startup_timeout
     print(f"{'resuming' if resumed else 'launching'} preset {preset}, strategy {strategy}, seed {seed} "
           f"on ROS_DOMAIN_ID {domain_id}; logs in {logs}", flush=True)
 
-    rclpy.init(domain_id=domain_id)
+    configure_discovery()  # the launcher's own participant on loopback too
+    # SIGINT is the launcher's to handle (KeyboardInterrupt below: stop the graph in order). rclpy's
+    # handler would shut the context down first, and a spin_once in progress then raises
+    # ExternalShutdownException instead (seen under load); SIGTERM stops the graph as Ctrl-C does.
+    rclpy.init(domain_id=domain_id, signal_handler_options=SignalHandlerOptions.NO)
+    signal.signal(signal.SIGTERM, signal.default_int_handler)
     node = rclpy.create_node("glocal_ros_launch")
     progress = Progress()
     watchdog = Watchdog(watchdog_sec)
