@@ -130,17 +130,22 @@ def cmd_assets_show(args: argparse.Namespace) -> int:
     return 0
 
 
+def write_bench_report(report: str, out: Path) -> int:
+    """Show a bench's report and write it to ``out`` (with the command that made it, inside)."""
+    out.parent.mkdir(parents=True, exist_ok=True)
+    out.write_text(report)
+    print(report, end="")
+    print(f"written to {out}")
+    return 0
+
+
 def cmd_bench_sim(args: argparse.Namespace) -> int:
     from glocal_app.benches.sim import run_sim_bench, sim_bench_report
 
     env_counts = [int(n) for n in args.envs.split(",")]
     rows = run_sim_bench(env_counts, args.batches, args.rounds)
     report = sim_bench_report(rows, "glocal-ros " + " ".join(sys.argv[1:]), args.batches, args.rounds)
-    args.out.parent.mkdir(parents=True, exist_ok=True)
-    args.out.write_text(report)
-    print(report, end="")
-    print(f"written to {args.out}")
-    return 0
+    return write_bench_report(report, args.out)
 
 
 def cmd_bench_learner(args: argparse.Namespace) -> int:
@@ -149,11 +154,7 @@ def cmd_bench_learner(args: argparse.Namespace) -> int:
     env_counts = [int(n) for n in args.envs.split(",")]
     rows = run_learner_bench(env_counts, args.steps, args.rounds, learner_node=not args.no_learner_node)
     report = learner_bench_report(rows, "glocal-ros " + " ".join(sys.argv[1:]), args.steps, args.rounds)
-    args.out.parent.mkdir(parents=True, exist_ok=True)
-    args.out.write_text(report)
-    print(report, end="")
-    print(f"written to {args.out}")
-    return 0
+    return write_bench_report(report, args.out)
 
 
 def cmd_bench_graph(args: argparse.Namespace) -> int:
@@ -163,10 +164,7 @@ def cmd_bench_graph(args: argparse.Namespace) -> int:
         raise ValueError("--goals, --evaluations and --steps must be at least 1")
     rows = run_graph_bench(args.goals, args.evaluations, args.steps)
     report = graph_bench_report(rows, "glocal-ros " + " ".join(sys.argv[1:]))
-    args.out.parent.mkdir(parents=True, exist_ok=True)
-    args.out.write_text(report)
-    print(report, end="")
-    print(f"written to {args.out}")
+    write_bench_report(report, args.out)
     return 0 if all(row.lost == 0 for row in rows) else 1
 
 

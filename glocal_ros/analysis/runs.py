@@ -339,36 +339,29 @@ def _messages(bag: Path, topics: Sequence[str], counts: dict[str, int]) -> Itera
     a hash that does not match them); when the fallback cannot open it either,
     the first error is the one raised. Errors while reading are not caught.
     """
+    reader, decode = _open_for_decoding(bag)
+    try:
+        counts.update({c.topic: c.msgcount for c in reader.connections})
+        connections = [c for c in reader.connections if c.topic in topics]
+        for connection, log_time, raw in reader.messages(connections=connections):
+            yield connection.topic, log_time, decode(raw, connection.msgtype)
+    finally:
+        reader.close()
+
+
+def _open_for_decoding(bag: Path):
+    """An open reader of ``bag`` and its ``decode(raw, msgtype)``: the embedded definitions, else the current."""
     reader = AnyReader([bag], default_typestore=_fallback_typestore())
     try:
         reader.open()
-    except AnyReaderError as error:
-        yield from _messages_with_current_definitions(bag, topics, counts, error)
-        return
-    try:
-        counts.update({c.topic: c.msgcount for c in reader.connections})
-        connections = [c for c in reader.connections if c.topic in topics]
-        for connection, log_time, raw in reader.messages(connections=connections):
-            yield connection.topic, log_time, reader.deserialize(raw, connection.msgtype)
-    finally:
-        reader.close()
-
-
-def _messages_with_current_definitions(bag: Path, topics: Sequence[str], counts: dict[str, int],
-                                       first_error: Exception) -> Iterator[tuple[str, int, object]]:
-    typestore = _fallback_typestore()
-    try:
-        reader = Reader(bag)
-        reader.open()
-    except Exception as error:  # noqa: BLE001 - the first error says what is wrong with the bag
-        raise first_error from error
-    try:
-        counts.update({c.topic: c.msgcount for c in reader.connections})
-        connections = [c for c in reader.connections if c.topic in topics]
-        for connection, log_time, raw in reader.messages(connections=connections):
-            yield connection.topic, log_time, typestore.deserialize_cdr(raw, connection.msgtype)
-    finally:
-        reader.close()
+        return reader, reader.deserialize
+    except AnyReaderError as first_error:
+        try:
+            fallback = Reader(bag)
+            fallback.open()
+        except Exception as error:  # noqa: BLE001 - the first error says what is wrong with the bag
+            raise first_error from error
+        return fallback, _fallback_typestore().deserialize_cdr
 
 
 def read_bag(bag: Path, count_episodes: bool = True) -> BagContents:
