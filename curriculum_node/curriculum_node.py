@@ -26,6 +26,7 @@ from glocal_interfaces.msg import CurriculumState, TaskAssignment, TaskCluster
 from rclpy.duration import Duration
 from rclpy.node import Node
 
+from glocal_ros.curriculum.codes import BASELINE_TASKS
 from glocal_ros.curriculum.journal import JournaledLearner
 from glocal_ros.files import atomic_write
 from glocal_ros.paths import ros_home
@@ -98,6 +99,8 @@ class CurriculumNode(Node):
                                            "baselines: training env steps between evaluations", **positive),
             baseline_chunk_episodes=declare(self, "baseline_chunk_episodes", _DEFAULTS["baseline_chunk_episodes"],
                                             "random: episodes per Train goal", **positive),
+            baseline_tasks=declare(self, "baseline_tasks", _DEFAULTS["baseline_tasks"],
+                                   f"baselines draw from: {' or '.join(BASELINE_TASKS)} tasks"),
         )
 
     def run(self) -> None:
@@ -153,7 +156,7 @@ def state_message(state: RunState, stamp) -> CurriculumState:
     message = CurriculumState(
         run_id=state.run_id, seed=state.seed, strategy=state.strategy, status=state.status,
         iteration=state.iteration, total_steps=state.total_steps, step_budget=state.step_budget,
-        silhouette=state.silhouette,
+        evaluation_episodes=state.evaluation_episodes, silhouette=state.silhouette,
         clusters=[TaskCluster(tasks=list(tasks), scores=list(scores), mean_score=sum(scores) / len(scores))
                   for tasks, scores in state.clusters],
         chosen_cluster=state.chosen_cluster, global_task=state.global_task, local_tasks=list(state.local_tasks),

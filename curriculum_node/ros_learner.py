@@ -97,7 +97,8 @@ class RosLearner:
 
     def train(self, request: TrainRequest) -> TrainResult:
         goal = Train.Goal(
-            task=request.task, episode_tasks=list(request.episode_tasks), initial_policy=request.initial_policy,
+            task=request.task, episode_tasks=list(request.episode_tasks), episode_limit=request.episode_limit,
+            initial_policy=request.initial_policy,
             output_policy=request.output_policy, step_budget=request.step_budget,
             threshold=-1.0 if request.threshold is None else float(request.threshold),
             eval_episodes=request.eval_episodes or 0, eval_interval=request.eval_interval,

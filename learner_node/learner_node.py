@@ -184,7 +184,8 @@ class LearnerNode(Node):
         try:
             eval_episodes = goal.eval_episodes or DEFAULT_EVAL_EPISODES
             spec = TrainSpec(
-                task=goal.task, episode_tasks=tuple(goal.episode_tasks), initial_policy=goal.initial_policy,
+                task=goal.task, episode_tasks=tuple(goal.episode_tasks), episode_limit=goal.episode_limit,
+                initial_policy=goal.initial_policy,
                 output_policy=goal.output_policy, step_budget=goal.step_budget,
                 threshold=goal.threshold if goal.threshold >= 0 else DEFAULT_THRESHOLD_FRACTION * eval_episodes,
                 eval_episodes=eval_episodes,

@@ -19,7 +19,7 @@ order of one step); around it:
   seeded goal, so that a resumed goal goes on exactly as the uninterrupted
   one (the sim's episodes in flight cannot be saved);
 - the trained model is written to the policy store only when the goal ends
-  by itself (budget spent or learned), never half-way; the goal's outcome is
+  by itself (budget spent, learned or its episodes done), never half-way; the goal's outcome is
   kept, so the same goal sent again (its client restarted and lost the
   result) gets it back instead of training again.
 
@@ -31,6 +31,12 @@ Choices:
   the baselines train one policy through many short goals.
 - Only training env steps count against the budget; evaluation steps do not
   (the paper counts training timesteps).
+- SB3 steps the N envs together, so a goal trains whole vector steps and
+  never passes its budget: it may stop up to N - 1 steps short of it
+  (``steps_used`` says what it trained; the curriculum charges that).
+- ``episode_limit`` ends a goal at the vector step where that many training
+  episodes have finished (more, when several envs finish at that step); the
+  episodes still running are cut, as at any goal's end.
 - The gradient steps of a vector step run while the sim computes the next
   one (``learner_node.updates``): SB3's updates, a step later.
 """
@@ -83,6 +89,7 @@ class TrainSpec:
     output_policy: str
     step_budget: int
     episode_tasks: tuple[str, ...] = ()
+    episode_limit: int = 0  # end the goal once this many training episodes have finished; 0: no limit
     threshold: float = DEFAULT_THRESHOLD_FRACTION * DEFAULT_EVAL_EPISODES
     eval_episodes: int = DEFAULT_EVAL_EPISODES
     eval_interval: int = 0
@@ -108,6 +115,8 @@ class TrainSpec:
             raise ValueError(f"threshold {self.threshold} must lie in [0, eval_episodes={self.eval_episodes})")
         if not 1 <= self.eval_episodes <= max_eval_episodes:
             raise ValueError(f"eval_episodes {self.eval_episodes} outside 1..{max_eval_episodes}")
+        if self.episode_limit < 0:
+            raise ValueError(f"episode_limit must not be negative, got {self.episode_limit}")
         if self.eval_interval < 0:
             raise ValueError(f"eval_interval must not be negative, got {self.eval_interval}")
         if self.seed is not None and not 0 <= self.seed <= MAX_SEED:
@@ -386,6 +395,8 @@ class _Goal:
             # "Train until S > B" checks first: a policy that passes already is not trained.
             self.evaluate(state.steps_used)
         remaining = spec.step_budget - state.steps_used
+        # SB3 steps the N envs together: whole steps of N only, so the goal never passes its budget.
+        remaining -= remaining % self.vec_env.num_envs
         if remaining > 0 and not (spec.stop_when_learned and state.learned):
             try:
                 with self.updates:
@@ -454,7 +465,8 @@ class _Goal:
                                            state.score["successes"] if state.score else -1.0,
                                            (steps - self.resumed) / max(now - self.started, 1e-9)))
         self.stop_reason = self.should_stop()
-        keep_going = not self.stop_reason and not (spec.stop_when_learned and state.learned)
+        keep_going = (not self.stop_reason and not (spec.stop_when_learned and state.learned)
+                      and not (spec.episode_limit and len(state.episodes) >= spec.episode_limit))
         if keep_going:  # SB3 skips the updates of the step that stops it
             self.updates.owe(self.vec_env.num_envs)
         return keep_going

@@ -32,6 +32,7 @@ class SimulatedLearner:
     learn_rate: float = 2e-4  # per training step, for an easy task from zero competence
     transfer: float = 0.5  # share of a gain that reaches a grid neighbour at distance 1
     max_episode_steps: int = 50
+    lockstep_envs: int = 1  # N: a goal trains a multiple of N steps, never past its budget, as the learner does
 
     def __post_init__(self):
         self._rng = np.random.default_rng(self.seed)
@@ -52,16 +53,23 @@ class SimulatedLearner:
             raise ValueError(f"step_budget must be at least 1, got {request.step_budget}")
         competence = self._policy(request.initial_policy).copy()
         tasks = list(request.episode_tasks) or [request.task]
-        chunk = request.eval_interval or request.step_budget
+        budget = request.step_budget - request.step_budget % self.lockstep_envs
+        chunk = request.eval_interval or budget
         steps, score, learned, episodes = 0, -1.0, False, []
         if request.task and request.stop_when_learned:  # "until S > B" checks first, as the learner does
             score = float(rng.binomial(request.eval_episodes, competence[task_index(request.task)]))
             learned = score > request.threshold
-        while steps < request.step_budget and not (learned and request.stop_when_learned):
-            chunk_steps = min(chunk, request.step_budget - steps)
+        limit = request.episode_limit or math.inf
+        while steps < budget and not (learned and request.stop_when_learned) and len(episodes) < limit:
+            chunk_steps = min(chunk, budget - steps)
+            new = self._episodes(competence, tasks, chunk_steps, rng, first=len(episodes),
+                                 most=limit - len(episodes))
+            if len(episodes) + len(new) >= limit:  # the goal ends with the limit's last episode
+                chunk_steps = min(chunk_steps, -(-sum(e.length for e in new) // self.lockstep_envs)
+                                  * self.lockstep_envs)
             for task in tasks:
                 self._practise(competence, task, chunk_steps / len(tasks))
-            episodes += self._episodes(competence, tasks, chunk_steps, rng)
+            episodes += new
             steps += chunk_steps
             if request.task:
                 score = float(rng.binomial(request.eval_episodes, competence[task_index(request.task)]))
@@ -89,10 +97,11 @@ class SimulatedLearner:
             j = task_index(other)
             competence[j] = min(1.0, competence[j] + share * gain * (1 - competence[j]))
 
-    def _episodes(self, competence: np.ndarray, tasks: list[str], steps: int,
-                  rng: np.random.Generator) -> list[EpisodeSummary]:
-        episodes, used, turn = [], 0, 0
-        while used < steps:
+    def _episodes(self, competence: np.ndarray, tasks: list[str], steps: int, rng: np.random.Generator,
+                  first: int = 0, most: float = math.inf) -> list[EpisodeSummary]:
+        """Episodes in ``steps`` (the last one cut), at most ``most``; the ``first``-th of ``tasks`` starts."""
+        episodes, used, turn = [], 0, first
+        while used < steps and len(episodes) < most:
             task = tasks[turn % len(tasks)]
             turn += 1
             success = bool(rng.random() < competence[task_index(task)])

@@ -1,12 +1,15 @@
 """The strategies of glocal_ros.curriculum against the learner double: the paper's rules, budgets, resuming."""
 
+import json
 import math
 
 import pytest
 
 from glocal_ros.clustering import cluster_tasks, split_global_local
 from glocal_ros.curriculum.journal import JournaledLearner, JournalMismatch
-from glocal_ros.curriculum.codes import ROLE_CLUSTER, ROLE_GLOBAL, ROLE_LOCAL, ROLE_SAMPLED, STATUS_FINISHED
+from glocal_ros.curriculum.codes import (
+    ROLE_CLUSTER, ROLE_GLOBAL, ROLE_LOCAL, ROLE_SAMPLED, STATUS_EVALUATING, STATUS_FINISHED,
+)
 from glocal_ros.curriculum.learner import TrainRequest
 from glocal_ros.curriculum.run import Run, RunConfig
 from glocal_ros.curriculum.strategies import STRATEGIES, run_strategy
@@ -36,6 +39,21 @@ class Recorder:
 
     def assigned(self, assignment):
         self.assignments.append(assignment)
+
+
+class Answers:
+    """A learner that keeps every train answer beside its request."""
+
+    def __init__(self, learner):
+        self.learner, self.goals = learner, []
+
+    def __getattr__(self, name):
+        return getattr(self.learner, name)
+
+    def train(self, request):
+        result = self.learner.train(request)
+        self.goals.append((request, result))
+        return result
 
 
 def _copy(state):
@@ -131,16 +149,29 @@ def test_equal_scores_make_one_cluster_whose_middle_task_goes_first(score):
     assert split_global_local(clustering.clusters[0]) == ("C2", ["A0", "B1", "D3", "E4"])
 
 
-def test_the_total_budget_is_never_exceeded_and_milestones_are_recorded():
+def test_budgets_milestones_and_evaluation_episodes_of_every_strategy():
+    """Against a double with N = 4 lockstep envs and budgets that are not multiples of 4: a goal trains
+    a multiple of 4 steps, never past its budget; the run's last 1..3 steps cannot be trained, and
+    the run ends instead of asking for them forever (``DiesAfter`` stops one that would)."""
     for strategy in STRATEGIES:
-        the_run, learner, _ = run(strategy, **SHORT)
+        learner = Answers(SimulatedLearner(seed=1, lockstep_envs=4))
+        budgets = dict(step_budget=40_002, task_step_budget=8_001)
+        the_run = Run(config(strategy, **(SHORT | budgets)), DiesAfter(learner, 5_000))
+        run_strategy(the_run)
         state = the_run.state
-        assert state.total_steps <= 40_000, strategy
-        assert all(1 <= r.step_budget <= 40_000 for r in trains(learner)), strategy
-        assert state.milestone_steps == [m for m in range(10_000, 40_001, 10_000) if m <= state.total_steps]
+        assert state.status == STATUS_FINISHED, strategy
+        assert all(1 <= request.step_budget <= 40_002 for request, _ in learner.goals), strategy
+        assert all(result.steps_used <= request.step_budget and result.steps_used % 4 == 0
+                   for request, result in learner.goals), strategy
+        assert state.total_steps == sum(result.steps_used for _, result in learner.goals) <= 40_002, strategy
+        assert state.total_steps > 40_002 - 4 or not state.remaining_tasks, strategy
+        # A finished run's count is final: it stands at every milestone up to the budget.
+        assert state.milestone_steps == [10_000, 20_000, 30_000, 40_000], strategy
         for milestone, learned in zip(state.milestone_steps, state.milestone_learned):
             assert learned == sum(1 for s in state.learned_at_steps if s <= milestone)
-        assert state.status == STATUS_FINISHED
+        # Evaluation episodes are counted beside the training steps, not charged to the budget.
+        evaluated_tasks = sum(len(args[1]) for call, args in learner.calls if call == "evaluate")
+        assert state.evaluation_episodes == 100 * evaluated_tasks > 0, strategy
 
 
 @pytest.mark.parametrize("strategy", list(STRATEGIES))
@@ -174,18 +205,105 @@ def test_random_samples_tasks_uniformly():
     assert max(counts.values()) < 1.3 * min(counts.values())
 
 
-def test_ablations():
-    the_run, learner, recorder = run("glocal_no_global")
-    assert recorder.assignments[0].role == ROLE_CLUSTER
+def test_no_global_sweeps_the_cluster_with_the_per_task_rule():
+    """The paper's "policy trained over all tasks within the cluster", that "arbitrarily sweeps" them."""
+    learner = Answers(SimulatedLearner(seed=1))
+    the_run, _, recorder = run("glocal_no_global", learner=learner)
     first_state = next(s for s in recorder.states if s.clusters)
-    assert recorder.assignments[0].episode_tasks == tuple(first_state.clusters[0][0])
     assert not first_state.global_task
+    cluster = first_state.clusters[0][0]
+    assert sorted(first_state.local_tasks) == sorted(cluster), "the sweep covers the cluster, in some order"
+    sweep = learner.goals[: len(cluster)]
+    assert [request.task for request, _ in sweep] == first_state.local_tasks
+    assert {a.role for a in recorder.assignments[: len(cluster)]} == {ROLE_CLUSTER}
+    for index, (request, result) in enumerate(sweep):
+        assert request.stop_when_learned and not request.episode_tasks, "each task until it passes B"
+        assert request.step_budget == 60_000 and request.eval_interval == 5_000, "the per-task budget"
+        assert request.output_policy == f"glocal_no_global-seed3.C1_{index}"
+        # One policy through the whole cluster, learned or not.
+        assert request.initial_policy == ("prior" if index == 0 else sweep[index - 1][0].output_policy)
+        if result.learned:
+            learned = the_run.state.learned_tasks.index(request.task)
+            assert the_run.state.learned_policies[learned] == request.output_policy
+    # The policy at the end of the sweep is the next iteration's prior.
+    evaluations = [args for call, args in learner.calls if call == "evaluate"]
+    assert evaluations[1][0] == sweep[-1][0].output_policy
 
+
+def test_no_global_runs_to_the_end_of_its_pool():
+    the_run, _, _ = run("glocal_no_global", step_budget=2_000_000)
+    state = the_run.state
+    assert sorted(state.learned_tasks) == sorted(SMALL) and state.status == STATUS_FINISHED
+
+
+def test_random_cluster_picks_other_clusters():
     chosen = set()
     for seed in range(6):
         _, _, recorder = run("glocal_random_cluster", seed=seed, step_budget=100_000)
         chosen |= {s.chosen_cluster for s in recorder.states if s.clusters}
     assert len(chosen) > 1, "a random cluster, not always C1"
+
+
+@pytest.mark.parametrize("strategy", ["random", "alp_gmm_10"])
+@pytest.mark.parametrize("baseline_tasks", ["all", "unlearned"])
+def test_the_baselines_draw_from_all_tasks_or_the_unlearned_ones(strategy, baseline_tasks):
+    learner = Answers(SimulatedLearner(seed=1))
+    the_run, _, _ = run(strategy, learner=learner, baseline_tasks=baseline_tasks, **SHORT)
+    learned_at = dict(zip(the_run.state.learned_tasks, the_run.state.learned_at_steps))
+    assert learned_at.get("A0") == 0, "the prior passes A0 at step 0"
+    drawn_once_learned, steps = set(), 0
+    for request, result in learner.goals:
+        drawn_once_learned |= {t for t in request.episode_tasks if learned_at.get(t, steps + 1) <= steps}
+        steps += result.steps_used
+    if baseline_tasks == "all":
+        assert "A0" in drawn_once_learned, "a learned task is still drawn"
+    else:
+        assert not drawn_once_learned
+
+
+def test_baseline_tasks_must_be_all_or_unlearned():
+    with pytest.raises(ValueError, match="baseline_tasks 'some'.*all, unlearned"):
+        config("random", baseline_tasks="some")
+
+
+@pytest.mark.parametrize("strategy, fit_rate", [("alp_gmm_10", 10), ("alp_gmm_250", 250)])
+def test_alp_gmm_draws_every_episode_from_the_gmm_of_its_last_refit(strategy, fit_rate):
+    """A goal is the episodes until the next refit, each a fresh draw: none is a task drawn
+    before a refit and cycled after it, as when a goal was fit_rate episodes' worth of steps."""
+    learner = Answers(SimulatedLearner(seed=1))
+    run(strategy, learner=learner, **(SHORT | dict(step_budget=60_000)))
+    assert len(learner.goals) > 3
+    for request, result in learner.goals:
+        assert request.episode_limit == fit_rate
+        assert len(request.episode_tasks) >= fit_rate
+        assert [e.task for e in result.episodes] == list(request.episode_tasks[: len(result.episodes)])
+    *whole, last = learner.goals
+    assert all(len(result.episodes) == fit_rate for _, result in whole)
+
+
+def test_baselines_evaluate_at_step_zero_and_then_on_a_fixed_schedule():
+    """Every k x baseline_eval_interval is checked at the first goal end at or past it (it drifted
+    when the next check was set to total_steps + interval), and step 0 is checked as GloCAL's is."""
+    interval = 3_000
+    the_run, _, recorder = run("random", **(SHORT | dict(baseline_eval_interval=interval)))
+    checked_at = []
+    for state in recorder.states:
+        if state.status == STATUS_EVALUATING and (not checked_at or checked_at[-1] != state.total_steps):
+            checked_at.append(state.total_steps)
+    ends = sorted({s.total_steps for s in recorder.states})  # 0, then where each goal ended
+    expected = [0] + [end for previous, end in zip(ends, ends[1:]) if end // interval > previous // interval]
+    if the_run.steps_left == 0 and ends[-1] not in expected:
+        expected.append(ends[-1])  # the budget's end
+    assert checked_at == expected
+    assert len(checked_at) >= 5
+
+
+def test_a_run_that_learns_everything_early_stands_at_every_milestone():
+    the_run, _, _ = run("glocal", tasks=("A0",), **SHORT)  # the prior passes A0 at its first check
+    state = the_run.state
+    assert state.total_steps == 0 and state.status == STATUS_FINISHED
+    assert state.milestone_steps == [10_000, 20_000, 30_000, 40_000]
+    assert state.milestone_learned == [1, 1, 1, 1]
 
 
 class Killed(Exception):
@@ -229,6 +347,15 @@ def test_a_killed_run_resumes_from_its_journal(tmp_path, strategy):
     assert journaled.replayed == 7
     assert resumed.state == uninterrupted.state
     assert len(learner.calls) == len(uninterrupted_learner.calls), "no call was asked twice"
+
+
+def test_the_journal_says_what_each_call_cost(tmp_path):
+    journal = tmp_path / "journal.jsonl"
+    the_run = Run(config("random", **SHORT), JournaledLearner(SimulatedLearner(seed=1), journal, {}))
+    run_strategy(the_run)
+    entries = [json.loads(line) for line in journal.read_text().splitlines()[1:]]
+    assert sum(e["cost"].get("training_steps", 0) for e in entries) == the_run.state.total_steps > 0
+    assert sum(e["cost"].get("evaluation_episodes", 0) for e in entries) == the_run.state.evaluation_episodes > 0
 
 
 def test_a_journal_of_other_settings_is_refused(tmp_path):

@@ -67,7 +67,8 @@ def state_cdr(stamp_ns: int, *, strategy: str, seed: int, status: int, iteration
                       scores=np.full(len(local_tasks) + bool(global_task), 50.0, dtype=np.float32), mean_score=50.0)
     msg = State(
         header=header(stamp_ns), run_id=f"{strategy}-seed{seed}", seed=seed, strategy=strategy, status=status,
-        iteration=iteration, total_steps=total_steps, step_budget=TOTAL_STEPS, silhouette=0.5,
+        iteration=iteration, total_steps=total_steps, step_budget=TOTAL_STEPS,
+        evaluation_episodes=total_steps // 10, silhouette=0.5,
         clusters=[cluster] if global_task else [], chosen_cluster=0, global_task=global_task,
         local_tasks=list(local_tasks), current_task=global_task, current_policy="prior",
         learned_tasks=names, learned_policies=[f"pi_{task}" for task in names],
@@ -293,6 +294,10 @@ def test_report_writes_figures_and_tables(recorded, tmp_path) -> None:
     assert "| random | 0.00e+00* |" in text  # 1M: both groups constant, unequal: p = 0, significant
     assert "bag.2`: **skipped**" in text and f"`{broken}`: **no run read**" in text
     assert "| 2 | 1,500 | B0 | B1, C0, C1 | B0, B1, C0 |" in text
+    # Per strategy, beside the learned objects: mean training steps and evaluation episodes.
+    assert "training steps (mean) | evaluation episodes (mean) |" in text
+    assert [line.endswith("| 4,500 | 450 |") for line in text.splitlines()
+            if line.startswith(("| glocal | 3 |", "| random | 2 |"))] == [True, True]
 
 
 def test_report_of_a_single_run_has_no_t_test(recorded, tmp_path) -> None:

@@ -91,7 +91,7 @@ def test_train_stores_the_policy_with_its_score(graph, ros_node):
     status, result = goal.result(120, processes=[graph["learner"]])
 
     assert status == GoalStatus.STATUS_SUCCEEDED, result.message
-    assert 60 <= result.steps_used < 62  # 2 envs step together
+    assert result.steps_used == 60
     assert (result.score.task, result.score.episodes) == ("A0", 2)
     assert result.learned == (result.score.successes > 75)
     assert result.episodes and all(e.task == "A0" and 1 <= e.length <= 10 for e in result.episodes)
@@ -371,6 +371,35 @@ def test_a_policy_that_passes_already_is_stored_without_training(tmp_path):
         envs.close()
     assert outcome.learned and outcome.steps_used == 0 and outcome.score.successes > 0
     assert policies.record("a0").steps_trained == policies.record("prior").steps_trained
+
+
+def test_a_goal_never_trains_past_its_budget_and_ends_at_its_episode_limit(tmp_path):
+    """In-process, 2 lockstep envs (T = 10): a budget of 41 trains 40 steps (SB3 steps both envs, so 42
+    before); an episode limit of 3 ends the goal at the step where the third episode finished."""
+    from glocal_ros.paths import assets_dir
+    from learner_node.policies import PolicyRegistry
+    from learner_node.policy_store import PolicyStore
+    from learner_node.training import Trainer, TrainSpec
+    from sim_node.batch import BatchedEnvs
+    from sim_node.grasp_env import GraspEnv, GraspEnvConfig
+
+    envs = BatchedEnvs(lambda i: GraspEnv("A0", config=GraspEnvConfig(max_steps=10)), 2, "A0")
+    policies = PolicyRegistry(PolicyStore(tmp_path / "store"), [PolicyStore(assets_dir() / "priors")])
+    trainer = Trainer(envs, policies, tmp_path / "checkpoints", seed=3)
+    listed = ("B0", "C3", "D2", "E1", "F0", "G6", "A1", "B2", "C4", "D5")
+    try:
+        odd = trainer.train(TrainSpec("", "prior", "odd", step_budget=41, episode_tasks=("A0",), seed=1))
+        limited = trainer.train(TrainSpec("", "prior", "limited", step_budget=1_000, episode_tasks=listed,
+                                          episode_limit=3, seed=2))
+    finally:
+        envs.close()
+    assert odd.completed and odd.steps_used == 40
+    assert policies.record("odd").steps_trained == policies.record("prior").steps_trained + 40
+    assert limited.completed and 3 <= len(limited.episodes) <= 4, limited.episodes
+    # Two envs take the listed tasks in turn: the third finished episode ends by the second round's end.
+    assert limited.steps_used <= 2 * 2 * 10
+    finished = [e.task for e in limited.episodes]
+    assert set(finished) <= set(listed) and len(set(finished)) == len(finished), "each a listed task, none twice"
 
 
 def test_a_goal_resumed_from_its_checkpoint_ends_as_the_uninterrupted_goal(tmp_path):

@@ -67,10 +67,16 @@ def final_section(groups: dict[str, list[RunData]]) -> list[str]:
         learned = [len(run.learned_tasks) for run in runs]
         mean = sum(learned) / len(learned)
         std = (sum((x - mean) ** 2 for x in learned) / (len(learned) - 1)) ** 0.5 if len(learned) > 1 else 0.0
+        evaluations = [run.evaluation_episodes for run in runs]
         rows.append((strategy, len(runs), f"{mean:.1f} ± {std:.1f}", min(learned), max(learned),
-                     f"{sum(run.finished for run in runs)}/{len(runs)}"))
+                     f"{sum(run.finished for run in runs)}/{len(runs)}",
+                     f"{sum(run.total_steps for run in runs) / len(runs):,.0f}",
+                     "-" if None in evaluations else f"{sum(evaluations) / len(evaluations):,.0f}"))
     return ["## Learned objects at the end of each run", "",
-            *_table(("strategy", "seeds", "learned (mean ± std)", "min", "max", "finished"), rows), ""]
+            *_table(("strategy", "seeds", "learned (mean ± std)", "min", "max", "finished",
+                     "training steps (mean)", "evaluation episodes (mean)"), rows),
+            "", "Evaluation episodes are not charged to the training-step budget (the paper's comparison "
+            "is at equal training timesteps); -: a run's states predate the count.", ""]
 
 
 def _stats_cell(table: MilestoneTable, strategy: str, step: int) -> str:

@@ -61,6 +61,7 @@ class CurriculumSnapshot:
     iteration: int
     total_steps: int
     step_budget: int
+    evaluation_episodes: int  # -1: the state predates the field
     num_clusters: int
     chosen_cluster: int
     global_task: str
@@ -95,6 +96,7 @@ class CurriculumSnapshot:
             iteration=int(get("iteration", 0)),
             total_steps=int(get("total_steps", 0)),
             step_budget=int(get("step_budget", 0)),
+            evaluation_episodes=int(get("evaluation_episodes", -1)),
             num_clusters=len(get("clusters", ())),
             chosen_cluster=int(get("chosen_cluster", 0)),
             global_task=str(get("global_task", "")),
@@ -203,6 +205,12 @@ class RunData:
     @property
     def step_budget(self) -> int:
         return self.final.step_budget
+
+    @property
+    def evaluation_episodes(self) -> int | None:
+        """Evaluation episodes the curriculum ran (not charged to the budget); None when not published."""
+        count = max(s.evaluation_episodes for s in self.states)
+        return None if count < 0 else count
 
     @property
     def finished(self) -> bool:

@@ -10,7 +10,8 @@ objects:
 
 - Task space: ``grid_coordinates(task)`` divided by 6, so both axes span
   [0, 1] on the full grid whatever subset of ``tasks`` a run uses (distances
-  then do not depend on the subset). Only ``tasks`` are candidates; a point
+  then do not depend on the subset). Only ``tasks`` are candidates (``retire``
+  takes one out: the baselines' ``unlearned`` option); a point
   drawn from a Gaussian is snapped to the nearest of them (Euclidean), which
   replaces the original's clipping to the task-space box.
 - Returns are normalised to [0, 1] with ``[min_return, max_return]`` (default
@@ -81,9 +82,10 @@ class AlpGmmSampler:
         min_return: float = -50.0,
         max_return: float = 0.0,
     ) -> None:
-        self.tasks: tuple[str, ...] = tuple(dict.fromkeys(validate_tasks(tasks)))
+        self.tasks: tuple[str, ...] = tuple(dict.fromkeys(validate_tasks(tasks)))  # the candidates
         if not self.tasks:
             raise ValueError("tasks is empty")
+        self._known = frozenset(self.tasks)  # candidates and retired ones: what ``update`` accepts
         if fit_rate < 1:
             raise ValueError(f"fit_rate must be >= 1, got {fit_rate}")
         if not 0.0 <= random_fraction <= 1.0:
@@ -116,6 +118,11 @@ class AlpGmmSampler:
         return self._gmm is not None
 
     @property
+    def updates_before_refit(self) -> int:
+        """``update`` calls until the next GMM fit: the episodes that the current GMM still draws."""
+        return self.fit_rate - len(self._alps) % self.fit_rate
+
+    @property
     def alps(self) -> tuple[float, ...]:
         """ALP of every episode passed to ``update``, in order."""
         return tuple(self._alps)
@@ -134,7 +141,7 @@ class AlpGmmSampler:
     def update(self, task: str, episode_return: float) -> None:
         """Record one finished training episode of ``task``; refit every ``fit_rate`` calls."""
         validate_tasks([task])
-        if task not in self.tasks:
+        if task not in self._known:
             raise ValueError(f"task {task!r} is not one of this sampler's tasks")
         if not math.isfinite(episode_return):
             raise ValueError(f"episode_return must be finite, got {episode_return}")
@@ -148,6 +155,16 @@ class AlpGmmSampler:
         self._last_episode[task] = len(self._alps)
         if len(self._alps) % self.fit_rate == 0:
             self._refit()
+
+    def retire(self, task: str) -> None:
+        """Draw ``task`` no more: points then snap to the nearest remaining candidate. Its episodes
+        stay in the history that fits see, and ``update`` still takes episodes drawn before."""
+        if task not in self.tasks:
+            raise ValueError(f"task {task!r} is not a candidate of this sampler")
+        if len(self.tasks) == 1:
+            raise ValueError(f"{task!r} is the last candidate")
+        self.tasks = tuple(t for t in self.tasks if t != task)
+        self._coords = np.array([self._position(t) for t in self.tasks])
 
     def _nearest_earlier_return(self, task: str) -> float:
         if task in self._last_return:

@@ -6,22 +6,38 @@
 Train goals, each a chunk of episodes whose tasks the sampler drew, and
 keeps its replay buffer across them, so it is one continuous SAC run.
 
-The paper's fairness rule: every ``baseline_eval_interval`` training steps
-(and when the budget is spent) the policy is evaluated on every unlearned
-task, and a copy is saved for each task whose score passes B.
+The paper's fairness rule: the policy is evaluated on every unlearned task
+at step 0 (GloCAL too credits the tasks its prior already passes), every
+``baseline_eval_interval`` training steps on a fixed schedule, and when the
+budget is spent; a copy is saved for each task whose score passes B.
 
 Choices:
-- A chunk is ``baseline_chunk_episodes`` episodes for ``random`` and
-  ``fit_rate`` episodes for ALP-GMM (so the GMM sees every chunk's returns
-  before it draws the next), with the budget of that many full-length
-  episodes; the learner cycles through the drawn tasks if episodes end early.
-- Samplers draw from every task of the run, learned or not, as the original
-  single-policy methods do.
+- A goal ends after a chunk of finished episodes (``episode_limit``), not
+  after a number of steps: ``baseline_chunk_episodes`` for ``random``, and
+  for ALP-GMM the episodes until its next refit. So ALP-GMM-10 refits every
+  10 episodes and the next episodes are fresh draws from the refitted GMM:
+  draws from one fixed GMM are independent, so drawing a chunk's tasks at
+  once is drawing each episode's task from the current GMM, as the original
+  does. A goal lists ``TASKS_AHEAD`` draws beyond its chunk: with N
+  lockstep envs the learner takes 1 + 2N tasks before the first episode
+  ends (a probe reset, N running, N queued for the sim's auto-reset), and up
+  to N - 1 episodes are still running when the chunk's last one ends (cut
+  at the goal's end, they train but report no return). With more than 16
+  envs the listed tasks would cycle. Its step budget is the chunk's
+  full-length episodes.
+- ``baseline_tasks`` (default ``all``): the samplers draw from every task of
+  the run, learned or not. The paper describes random as "randomly selecting
+  objects for training" with "a single policy", and for ALP-GMM changes the
+  original only by saving the above-threshold policies; neither says a
+  learned object leaves the pool, and a single policy that stops seeing the
+  objects it learned can forget them. ``unlearned`` drops a task from the
+  sampler once a copy has learned it, which spends the budget on what is
+  left: a stronger baseline than the paper ran, for those who want it.
 """
 
 from __future__ import annotations
 
-from typing import Protocol
+from typing import Callable, Protocol
 
 import numpy as np
 
@@ -31,10 +47,17 @@ from glocal_ros.curriculum.codes import ROLE_SAMPLED
 from glocal_ros.curriculum.run import Run
 
 
+#: Draws listed beyond a goal's chunk of episodes: enough for N <= 16 lockstep envs (see the module doc).
+TASKS_AHEAD = 33
+
+
 class TaskSampler(Protocol):
     def sample(self) -> str: ...
 
     def update(self, task: str, episode_return: float) -> None: ...
+
+    def retire(self, task: str) -> None:
+        """Draw ``task`` no more (it may still be updated with episodes drawn before)."""
 
 
 class UniformSampler:
@@ -48,41 +71,49 @@ class UniformSampler:
     def update(self, task: str, episode_return: float) -> None:
         pass
 
+    def retire(self, task: str) -> None:
+        if len(self.tasks) == 1:
+            raise ValueError(f"{task!r} is the last task to draw")
+        self.tasks.remove(task)
+
 
 def run_random(run: Run, max_episode_steps: int) -> None:
     sampler = UniformSampler(list(run.config.tasks), run.config.seed)
-    run_sampled(run, sampler, run.config.baseline_chunk_episodes, max_episode_steps)
+    run_sampled(run, sampler, lambda: run.config.baseline_chunk_episodes, max_episode_steps)
 
 
 def run_alp_gmm(run: Run, fit_rate: int, max_episode_steps: int) -> None:
     sampler = AlpGmmSampler(list(run.config.tasks), fit_rate=fit_rate, seed=run.config.seed)
-    run_sampled(run, sampler, fit_rate, max_episode_steps)
+    run_sampled(run, sampler, lambda: sampler.updates_before_refit, max_episode_steps)
 
 
-def run_sampled(run: Run, sampler: TaskSampler, chunk_episodes: int, max_episode_steps: int) -> None:
+def run_sampled(run: Run, sampler: TaskSampler, chunk_episodes: Callable[[], int], max_episode_steps: int) -> None:
     """Train one policy on sampled tasks until the budget is spent or every task is learned."""
     config = run.config
     policy = config.policy_name("policy")
     initial = config.initial_policy
-    next_evaluation = config.baseline_eval_interval
     run.begin_iteration(1)
+    _save_passing_tasks(run, sampler, initial)
+    next_evaluation = config.baseline_eval_interval
     while not run.over:
-        tasks = tuple(sampler.sample() for _ in range(chunk_episodes))
+        chunk = chunk_episodes()
+        tasks = tuple(sampler.sample() for _ in range(chunk + TASKS_AHEAD))
         result = run.train(ROLE_SAMPLED, TrainRequest(
-            task="", episode_tasks=tasks, initial_policy=initial, output_policy=policy,
-            step_budget=chunk_episodes * max_episode_steps, stop_when_learned=False, keep_replay_buffer=True,
+            task="", episode_tasks=tasks, episode_limit=chunk, initial_policy=initial, output_policy=policy,
+            step_budget=chunk * max_episode_steps, stop_when_learned=False, keep_replay_buffer=True,
         ))
         initial = policy
         run.set_current_policy(policy)
         for episode in result.episodes:
             sampler.update(episode.task, episode.episode_return)
         if run.state.total_steps >= next_evaluation or run.steps_left == 0:
-            next_evaluation = run.state.total_steps + config.baseline_eval_interval
-            _save_passing_tasks(run, policy)
+            while next_evaluation <= run.state.total_steps:
+                next_evaluation += config.baseline_eval_interval
+            _save_passing_tasks(run, sampler, policy)
     run.finish()
 
 
-def _save_passing_tasks(run: Run, policy: str) -> None:
+def _save_passing_tasks(run: Run, sampler: TaskSampler, policy: str) -> None:
     """The fairness rule: a copy of the policy for each unlearned task whose score passes B."""
     remaining = list(run.state.remaining_tasks)
     for task, score in run.evaluate(policy, remaining).items():
@@ -90,3 +121,5 @@ def _save_passing_tasks(run: Run, policy: str) -> None:
             copy = run.config.policy_name(task)
             run.learner.copy(policy, copy)
             run.mark_learned(task, copy)
+            if run.config.baseline_tasks == "unlearned" and not run.over:
+                sampler.retire(task)

@@ -25,4 +25,7 @@ STATUS_FINISHED = 5
 ROLE_GLOBAL = 0
 ROLE_LOCAL = 1
 ROLE_SAMPLED = 2  # baselines: episodes of tasks drawn by a sampler
-ROLE_CLUSTER = 3  # glocal_no_global: all tasks of the cluster
+ROLE_CLUSTER = 3  # glocal_no_global: a task of the cluster's sweep
+
+#: ``RunConfig.baseline_tasks``: what the baselines' samplers draw from (``baselines`` argues the default).
+BASELINE_TASKS: tuple[str, ...] = ("all", "unlearned")

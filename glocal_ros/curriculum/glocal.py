@@ -8,9 +8,13 @@ learned when its score passes B within its training budget; otherwise it
 returns to the pool for the next iteration.
 
 Ablations: ``glocal_random_cluster`` picks a cluster uniformly instead of
-C_1; ``glocal_no_global`` trains pi_curr on all tasks of C_1 at once (each
-episode's task in turn) and that cluster policy, not a global task's, is
-the prior for the local tasks and for the next iteration.
+C_1. ``glocal_no_global`` has no global task: "a policy trained over all
+tasks within the cluster", one that "arbitrarily sweeps through all tasks
+within the cluster", is the prior for the next iteration. It is one policy
+trained from pi_curr on each task of C_1 in turn, in an order drawn at
+random, with the per-task rule of Algorithm 1 (each task until its score
+passes B or its budget is spent); a task is learned by the policy as it
+was when it passed, and the policy at the end of the sweep is pi_curr.
 
 Choices the paper leaves open, made here:
 - "Train until S > B" checks the score before training, then every
@@ -22,10 +26,9 @@ Choices the paper leaves open, made here:
   training session".
 - The local chain continues from the last policy that learned its task: a
   local task that failed does not hand its policy on.
-- The cluster policy of ``glocal_no_global`` trains for the per-task budget
-  times the cluster's size (what GloCAL could spend on the cluster), and is
-  then evaluated on each cluster task; those above B are learned by it, the
-  others are trained as local tasks from it.
+- The sweep of ``glocal_no_global`` goes on from each task's policy whether
+  the task was learned or not (it is one policy through the whole cluster,
+  unlike the local chain), and a task it did not learn returns to the pool.
 - An iteration whose clustering leaves no task it could train (all budget
   spent) ends the run; so do an empty pool and ``max_iter``.
 """
@@ -35,7 +38,7 @@ from __future__ import annotations
 import numpy as np
 
 from glocal_ros.clustering import cluster_tasks, split_global_local
-from glocal_ros.curriculum.learner import TrainRequest, passes_threshold
+from glocal_ros.curriculum.learner import TrainRequest
 from glocal_ros.curriculum.codes import ROLE_CLUSTER, ROLE_GLOBAL, ROLE_LOCAL
 from glocal_ros.curriculum.run import Run
 
@@ -58,25 +61,32 @@ def run_glocal(run: Run, ablation: str = "") -> None:
         cluster = clustering.clusters[chosen]
 
         if ablation == "no_global":
-            run.show_clustering(clustering, chosen, "", list(cluster.tasks))
-            prior = _train_cluster(run, current, list(cluster.tasks), iteration)
-            local_tasks = [task for task in cluster.tasks if not run.is_learned(task)]
+            sweep = [cluster.tasks[i] for i in rng.permutation(len(cluster.tasks))]
+            run.show_clustering(clustering, chosen, "", sweep)
+            current = _train_chain(run, ROLE_CLUSTER, current, sweep, f"C{iteration}", every_policy=True)
         else:
             global_task, local_tasks = split_global_local(cluster)
             run.show_clustering(clustering, chosen, global_task, local_tasks)
-            prior = config.policy_name(f"G{iteration}")
-            _train_task(run, ROLE_GLOBAL, global_task, current, prior)
-
-        policy = prior
-        for index, task in enumerate(local_tasks):
-            if run.over:
-                break
-            output = config.policy_name(f"L{iteration}_{index}")
-            if _train_task(run, ROLE_LOCAL, task, policy, output):
-                policy = output
-        current = prior
+            global_policy = config.policy_name(f"G{iteration}")
+            _train_task(run, ROLE_GLOBAL, global_task, current, global_policy)
+            _train_chain(run, ROLE_LOCAL, global_policy, local_tasks, f"L{iteration}", every_policy=False)
+            current = global_policy
         run.set_current_policy(current)
     run.finish()
+
+
+def _train_chain(run: Run, role: int, first: str, tasks: list[str], names: str, every_policy: bool) -> str:
+    """Train ``tasks`` in turn, the first from policy ``first``, each next one from the policy handed on:
+    every task's output (``every_policy``: the sweep of one policy) or, in the local chain, the output of
+    the last task learned. Outputs are ``names``_0, _1, ...; returns the last policy handed on."""
+    policy = first
+    for index, task in enumerate(tasks):
+        if run.over:
+            break
+        output = run.config.policy_name(f"{names}_{index}")
+        if _train_task(run, role, task, policy, output) or every_policy:
+            policy = output
+    return policy
 
 
 def _train_task(run: Run, role: int, task: str, initial: str, output: str) -> bool:
@@ -91,17 +101,3 @@ def _train_task(run: Run, role: int, task: str, initial: str, output: str) -> bo
     if result.learned:
         run.mark_learned(task, output)
     return result.learned
-
-
-def _train_cluster(run: Run, initial: str, tasks: list[str], iteration: int) -> str:
-    """``glocal_no_global``: one policy over all tasks of the cluster; marks those it learned."""
-    config = run.config
-    output = config.policy_name(f"C{iteration}")
-    run.train(ROLE_CLUSTER, TrainRequest(
-        task="", episode_tasks=tuple(tasks), initial_policy=initial, output_policy=output,
-        step_budget=config.task_step_budget * len(tasks), stop_when_learned=False,
-    ))
-    for task, score in run.evaluate(output, tasks).items():
-        if passes_threshold(score, config.threshold):
-            run.mark_learned(task, output)
-    return output

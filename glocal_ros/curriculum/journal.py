@@ -10,6 +10,10 @@ So every strategy resumes exactly where it stopped, with no per-strategy
 save code, and the call in flight at the kill is simply asked again (the
 learner resumes a re-sent Train goal from its checkpoint).
 
+Each entry of a call also says what it cost: ``training_steps`` for a train
+call, ``evaluation_episodes`` for an evaluate call (the budget counts only
+the former, as the paper does; the sums of both compare strategies).
+
 Given a run seed, the n-th call (evaluate or train) carries the seed
 ``derived_seed(seed, n)``: its episodes and SAC's sampling are then a
 function of the run seed, the call and the policies it reads, not of what
@@ -71,21 +75,23 @@ class JournaledLearner:
         if seed is not None:
             arguments["seed"] = seed
         return self._call("evaluate", arguments, lambda: self.learner.evaluate(policy, tasks, episodes, seed),
-                          lambda answer: answer)
+                          lambda answer: answer, lambda answer: {"evaluation_episodes": episodes * len(answer)})
 
     def train(self, request: TrainRequest) -> TrainResult:
         if request.seed is None:
             request = replace(request, seed=self._call_seed())
-        return self._call("train", asdict(request), lambda: self.learner.train(request), _train_result)
+        return self._call("train", asdict(request), lambda: self.learner.train(request), _train_result,
+                          lambda answer: {"training_steps": answer.steps_used})
 
     def copy(self, source: str, destination: str) -> None:
         self._call("copy", {"source": source, "destination": destination},
-                   lambda: self.learner.copy(source, destination), lambda answer: None)
+                   lambda: self.learner.copy(source, destination), lambda answer: None, lambda answer: {})
 
     def _call_seed(self) -> int | None:
         return None if self.seed is None else derived_seed(self.seed, self._calls)
 
-    def _call(self, name: str, arguments: dict, ask: Callable[[], Any], load: Callable[[Any], Any]):
+    def _call(self, name: str, arguments: dict, ask: Callable[[], Any], load: Callable[[Any], Any],
+              cost: Callable[[Any], dict[str, int]]):
         self._calls += 1
         arguments = _plain(arguments)
         if self.replaying:
@@ -96,7 +102,7 @@ class JournaledLearner:
             self.replayed += 1
             return load(entry["answer"])
         answer = ask()
-        self._append({"call": name, "arguments": arguments, "answer": _plain(answer)})
+        self._append({"call": name, "arguments": arguments, "answer": _plain(answer), "cost": cost(answer)})
         return answer
 
     def _append(self, entry: dict) -> None:

@@ -17,6 +17,7 @@ class TrainRequest:
     threshold: float | None = None  # B: learned when the score is above it; None: the run's (``Run.train``)
     eval_episodes: int | None = None  # S-bar; None: the run's
     episode_tasks: tuple[str, ...] = ()  # tasks of successive episodes; () trains ``task``
+    episode_limit: int = 0  # end the goal once this many training episodes have finished; 0: no limit
     eval_interval: int = 0  # env steps between evaluations of ``task``; 0: at the end only
     stop_when_learned: bool = True
     keep_replay_buffer: bool = False
@@ -42,7 +43,7 @@ class EpisodeSummary:
 class TrainResult:
     learned: bool
     score: float  # successes in the last evaluation of the task; -1 when none ran
-    steps_used: int  # training env steps
+    steps_used: int  # training env steps: never more than the budget (a lockstep learner may stop short of it)
     episodes: tuple[EpisodeSummary, ...] = ()  # every finished training episode, in order
 
 

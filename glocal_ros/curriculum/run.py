@@ -5,6 +5,18 @@ budget, clips each goal to what is left, keeps the learned tasks with the
 policy that learned each and the step count when it did, records the
 learned count at every milestone, and tells an observer (the node, which
 publishes) about each assignment and state change.
+
+Choices:
+- Evaluation episodes are not charged to the budget: the paper compares
+  strategies at equal training timesteps. The run counts them
+  (``RunState.evaluation_episodes``) so that a comparison can show them.
+- The learner steps N envs in lockstep and never trains past a goal's
+  budget, so it may stop up to N - 1 steps short. When a goal given all the
+  steps the run has left trains none of them (and its task did not pass),
+  those few steps cannot be spent: the budget counts as spent.
+- A finished run's learned count is final, so ``finish`` records it at
+  every milestone up to the budget: a run that learned everything early
+  stands in the milestone table beside those that used the whole budget.
 """
 
 from __future__ import annotations
@@ -16,7 +28,7 @@ from typing import Protocol
 from glocal_ros.clustering import Clustering
 from glocal_ros.curriculum.codes import (
     ROLE_CLUSTER, ROLE_GLOBAL, ROLE_LOCAL, ROLE_SAMPLED, STATUS_EVALUATING, STATUS_FINISHED, STATUS_STARTING,
-    STATUS_TRAINING, STATUS_TRAINING_GLOBAL, STATUS_TRAINING_LOCAL,
+    STATUS_TRAINING, STATUS_TRAINING_GLOBAL, STATUS_TRAINING_LOCAL, BASELINE_TASKS,
 )
 from glocal_ros.curriculum.learner import Learner, TrainRequest, TrainResult
 from glocal_ros.tasks import sorted_tasks, validate_tasks
@@ -44,6 +56,7 @@ class RunConfig:
     milestone_interval: int = 1_000_000
     baseline_eval_interval: int = 100_000  # baselines: env steps between evaluations on every unlearned task
     baseline_chunk_episodes: int = 100  # random: episodes sampled per Train goal
+    baseline_tasks: str = "all"  # baselines draw from "all" tasks or the "unlearned" ones (see ``baselines``)
 
     def __post_init__(self) -> None:
         if not self.tasks:
@@ -57,6 +70,8 @@ class RunConfig:
                 raise ValueError(f"{name} must be at least 1, got {getattr(self, name)}")
         if not 0 <= self.threshold < self.eval_episodes:
             raise ValueError(f"threshold {self.threshold} must lie in [0, eval_episodes={self.eval_episodes})")
+        if self.baseline_tasks not in BASELINE_TASKS:
+            raise ValueError(f"baseline_tasks {self.baseline_tasks!r}: expected one of {', '.join(BASELINE_TASKS)}")
         if not 2 <= self.k_min <= self.k_max:
             raise ValueError(f"need 2 <= k_min <= k_max, got {self.k_min}, {self.k_max}")
 
@@ -95,6 +110,7 @@ class RunState:
     status: int = STATUS_STARTING
     iteration: int = 0
     total_steps: int = 0
+    evaluation_episodes: int = 0
     silhouette: float = math.nan
     clusters: list[tuple[tuple[str, ...], tuple[float, ...]]] = field(default_factory=list)
     chosen_cluster: int = 0
@@ -131,11 +147,12 @@ class Run:
                               step_budget=config.step_budget, milestone_interval=config.milestone_interval,
                               remaining_tasks=sorted_tasks(config.tasks), current_policy=config.initial_policy)
         self._assignments = 0
+        self._stranded_steps = 0  # the budget's last steps, fewer than the learner's lockstep batch
 
     # What strategies ask.
     @property
     def steps_left(self) -> int:
-        return max(0, self.config.step_budget - self.state.total_steps)
+        return max(0, self.config.step_budget - self.state.total_steps - self._stranded_steps)
 
     @property
     def over(self) -> bool:
@@ -147,11 +164,14 @@ class Run:
 
     def evaluate(self, policy: str, tasks: list[str]) -> dict[str, float]:
         self._update(status=STATUS_EVALUATING, current_task="")
-        return self.learner.evaluate(policy, tasks, self.config.eval_episodes)
+        scores = self.learner.evaluate(policy, tasks, self.config.eval_episodes)
+        self.state.evaluation_episodes += self.config.eval_episodes * len(tasks)
+        return scores
 
     def train(self, role: int, request: TrainRequest) -> TrainResult:
         """Run one goal, its budget clipped to what the run has left, judged by the run's B and S-bar."""
-        request = replace(request, step_budget=min(request.step_budget, self.steps_left),
+        steps_left = self.steps_left
+        request = replace(request, step_budget=min(request.step_budget, steps_left),
                           threshold=self.config.threshold, eval_episodes=self.config.eval_episodes)
         self.observer.assigned(Assignment(self._assignments, self.state.iteration, role, request.task,
                                           request.episode_tasks, request.initial_policy, request.output_policy,
@@ -160,6 +180,8 @@ class Run:
         self._update(status=_STATUS_OF_ROLE[role], current_task=request.task)
         result = self.learner.train(request)
         self.state.total_steps += result.steps_used
+        if request.step_budget == steps_left and result.steps_used == 0 and not result.learned:
+            self._stranded_steps = steps_left
         # A milestone the goal ended on exactly waits: the strategy may mark a task learned at it.
         self._record_milestones(through=self.state.total_steps - 1)
         self._update()
@@ -186,7 +208,7 @@ class Run:
         self._update(current_policy=policy)
 
     def finish(self) -> None:
-        self._record_milestones(through=self.state.total_steps)
+        self._record_milestones(through=self.config.step_budget)
         self._update(status=STATUS_FINISHED, current_task="")
 
     def _record_milestones(self, through: int) -> None:
