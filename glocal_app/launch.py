@@ -55,6 +55,8 @@ RUN_FILE = "run.json"
 DEFAULT_WATCHDOG_SEC = 60.0
 EXIT_STALLED = 3
 LEARNER_PROBE_SEC = 5.0
+#: What the watchdog calls the curriculum's state: once heard, the run has started.
+CURRICULUM_HEARD = "curriculum state"
 
 
 class GraphStalled(RuntimeError):
@@ -62,10 +64,16 @@ class GraphStalled(RuntimeError):
 
 
 class Watchdog:
-    """When the graph was last heard from, and what it said."""
+    """When the graph was last heard from, and what it said.
 
-    def __init__(self, silence_sec: float):
+    The silence allowed is ``silence_sec`` once the curriculum has published its first state, and
+    ``startup_sec`` (if longer) before: a node that starts, and is discovered, on a loaded machine can
+    take longer than a phase may stay silent.
+    """
+
+    def __init__(self, silence_sec: float, startup_sec: float = 0.0):
         self.silence_sec = silence_sec
+        self.startup_sec = startup_sec
         self.last_heard: dict[str, float] = {}
         self.started = time.monotonic()
 
@@ -74,6 +82,10 @@ class Watchdog:
 
     def silent_for(self) -> float:
         return time.monotonic() - max(self.last_heard.values(), default=self.started)
+
+    def stalled(self) -> bool:
+        started = CURRICULUM_HEARD in self.last_heard
+        return self.silent_for() > (self.silence_sec if started else max(self.silence_sec, self.startup_sec))
 
     def describe_silence(self, state: CurriculumState | None, progress: TrainingProgress | None) -> str:
         now = time.monotonic()
@@ -196,7 +208,7 @@ def check_graph(node, watchdog: Watchdog, progress: Progress, started: Sequence[
         if process is not curriculum and not process.running:
             raise GraphStalled(f"{process.node} ended (exit code {process.process.returncode}) while the run "
                                f"went on: see {process.log_path}")
-    if watchdog.silent_for() > watchdog.silence_sec:
+    if watchdog.stalled():
         text = watchdog.describe_silence(progress.state, progress.progress)
         answers = learner_answers(node)
         text += "; learner_node answers requests" if answers else "; learner_node does not answer requests"
@@ -218,16 +230,19 @@ def launch(strategy: str, preset: str, seed: int, run_dir: Path, startup_timeout
     # SIGINT is the launcher's to handle (KeyboardInterrupt below: stop the graph in order). rclpy's
     # handler would shut the context down first, and a spin_once in progress then raises
     # ExternalShutdownException instead (seen under load); SIGTERM stops the graph as Ctrl-C does.
+    # Set, not inherited: a launcher started as a script's background job inherits SIGINT ignored
+    # (POSIX shells do that to async commands), and Python then leaves it so: Ctrl-C did nothing.
     rclpy.init(domain_id=domain_id, signal_handler_options=SignalHandlerOptions.NO)
+    signal.signal(signal.SIGINT, signal.default_int_handler)
     signal.signal(signal.SIGTERM, signal.default_int_handler)
     node = rclpy.create_node("glocal_ros_launch")
     progress = Progress()
-    watchdog = Watchdog(watchdog_sec)
+    watchdog = Watchdog(watchdog_sec, startup_timeout)
 
     def heard(what: str, handle=lambda message: None):
         return lambda message: (watchdog.heard(what), handle(message))
 
-    node.create_subscription(CurriculumState, names.CURRICULUM_STATE, heard("curriculum state", progress.on_state),
+    node.create_subscription(CurriculumState, names.CURRICULUM_STATE, heard(CURRICULUM_HEARD, progress.on_state),
                              qos.LATCHED)
     node.create_subscription(TrainingProgress, names.TRAINING_PROGRESS, heard("training progress",
                                                                               progress.on_progress), qos.EVENTS)

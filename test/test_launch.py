@@ -63,7 +63,10 @@ def test_the_same_seed_repeats_the_run_answer_for_answer(tmp_path):
 def test_ctrl_c_leaves_a_valid_bag_and_the_same_command_resumes(tmp_path):
     run_dir = tmp_path / "run"
     command = [*CLI, "launch", "--preset", "smoke", "--strategy", "random", "--out", str(run_dir)]
-    process = subprocess.Popen(command, stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True, cwd=REPO)
+    # Started with SIGINT ignored, as a script's background job is (and as CI may start the suite):
+    # the launcher must still stop on it.
+    process = subprocess.Popen(command, stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True, cwd=REPO,
+                               preexec_fn=lambda: signal.signal(signal.SIGINT, signal.SIG_IGN))
     journal = run_dir / "curriculum" / "journal.jsonl"
     deadline = time.monotonic() + 180
     while not (journal.is_file() and len(journal.read_text().splitlines()) >= 3):
