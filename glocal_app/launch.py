@@ -84,8 +84,10 @@ class Watchdog:
         return time.monotonic() - max(self.last_heard.values(), default=self.started)
 
     def stalled(self) -> bool:
-        started = CURRICULUM_HEARD in self.last_heard
-        return self.silent_for() > (self.silence_sec if started else max(self.silence_sec, self.startup_sec))
+        allowed = self.silence_sec
+        if CURRICULUM_HEARD not in self.last_heard:
+            allowed = max(allowed, self.startup_sec)
+        return self.silent_for() > allowed
 
     def describe_silence(self, state: CurriculumState | None, progress: TrainingProgress | None) -> str:
         now = time.monotonic()

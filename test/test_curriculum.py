@@ -277,8 +277,7 @@ def test_alp_gmm_draws_every_episode_from_the_gmm_of_its_last_refit(strategy, fi
         assert request.episode_limit == fit_rate
         assert len(request.episode_tasks) >= fit_rate
         assert [e.task for e in result.episodes] == list(request.episode_tasks[: len(result.episodes)])
-    *whole, last = learner.goals
-    assert all(len(result.episodes) == fit_rate for _, result in whole)
+    assert all(len(result.episodes) == fit_rate for _, result in learner.goals[:-1]), "the last may be cut short"
 
 
 def test_baselines_evaluate_at_step_zero_and_then_on_a_fixed_schedule():
