@@ -13,11 +13,13 @@ import sys
 from pathlib import Path
 
 from glocal_app.bag_cli import add_bag_commands
+from glocal_app.benches.transfer import TRANSFER_TASKS, TransferSettings
 from glocal_app.nodes import NODES
 from glocal_ros.curriculum.codes import STRATEGY_NAMES
 from glocal_ros.curriculum.learner import passes_threshold
 from glocal_ros.paths import assets_dir, objects_dir
 from glocal_ros.tasks import parse_task_list, sorted_tasks
+from learner_node.sac_settings import FINE_TUNING_RECIPES
 
 #: The ament package that installs the nodes' executables.
 PACKAGE = "glocal_ros"
@@ -168,6 +170,19 @@ def cmd_bench_graph(args: argparse.Namespace) -> int:
     return 0 if all(row.lost == 0 for row in rows) else 1
 
 
+def cmd_bench_transfer(args: argparse.Namespace) -> int:
+    from glocal_app.benches.transfer import run_transfer_bench, run_transfer_graph, transfer_bench_report
+
+    settings = TransferSettings(step_budget=args.budget, eval_interval=args.eval_interval,
+                                eval_episodes=args.eval_episodes, num_envs=args.envs)
+    seeds = [int(seed) for seed in args.seeds.split(",")]
+    recipes, tasks = args.recipes.split(","), args.tasks.split(",")
+    goals = (run_transfer_graph(recipes, tasks, seeds, settings) if args.graph
+             else run_transfer_bench(recipes, tasks, seeds, settings, args.jobs))
+    report = transfer_bench_report(goals, "glocal-ros " + " ".join(sys.argv[1:]), settings, args.jobs, args.graph)
+    return write_bench_report(report, args.out)
+
+
 def cmd_train_prior(args: argparse.Namespace) -> int:
     """Train the A0 prior in-process, evaluate it, store it as `prior` in assets/priors."""
     from tqdm import tqdm
@@ -274,6 +289,26 @@ def build_parser() -> argparse.ArgumentParser:
                                help="leave out the learner_node process (its Train action) column")
     bench_learner.add_argument("--out", type=Path, default=Path("bench/results/learner.md"))
     bench_learner.set_defaults(func=cmd_bench_learner)
+    transfer_defaults = TransferSettings()
+    bench_transfer = bench_commands.add_parser(
+        "transfer", help="fine-tuning the A0 prior on other objects: steps to B and collapses, recipe by recipe")
+    bench_transfer.add_argument("--recipes", default=",".join(FINE_TUNING_RECIPES),
+                                help=f"comma-separated fine-tuning recipes, of {', '.join(FINE_TUNING_RECIPES)}")
+    bench_transfer.add_argument("--tasks", default=",".join(TRANSFER_TASKS), help="comma-separated tasks")
+    bench_transfer.add_argument("--seeds", default="0,1,2", help="comma-separated goal seeds")
+    bench_transfer.add_argument("--budget", type=int, default=transfer_defaults.step_budget,
+                                help="training steps of every goal")
+    bench_transfer.add_argument("--eval-interval", type=int, default=transfer_defaults.eval_interval,
+                                help="training steps between evaluations")
+    bench_transfer.add_argument("--eval-episodes", type=int, default=transfer_defaults.eval_episodes,
+                                help="episodes per evaluation (S-bar)")
+    bench_transfer.add_argument("--envs", type=int, default=transfer_defaults.num_envs, help="envs N per goal")
+    bench_transfer.add_argument("--jobs", type=int, default=os.cpu_count() or 1,
+                                help="goals run at a time in-process")
+    bench_transfer.add_argument("--graph", action="store_true",
+                                help="through sim_node + learner_node processes (a pair per recipe, all at once)")
+    bench_transfer.add_argument("--out", type=Path, default=Path("bench/results/transfer.md"))
+    bench_transfer.set_defaults(func=cmd_bench_transfer)
 
     prior = commands.add_parser("train-prior", help="train the A0 prior (resumable) and store it in assets/priors")
     prior.add_argument("--steps", type=int, default=40_000, help="most SAC env steps")

@@ -43,6 +43,7 @@ from glocal_ros.tasks import validate_tasks
 from learner_node.evaluation import evaluate
 from learner_node.policies import PolicyExists, PolicyRegistry
 from learner_node.policy_store import PolicyStore
+from learner_node.sac_settings import DEFAULT_RECIPE, FINE_TUNING_RECIPES, fine_tuning_recipe
 from learner_node.sim_client import SimClient
 from learner_node.training import (DEFAULT_EVAL_EPISODES, DEFAULT_MAX_STEP_BUDGET, DEFAULT_THRESHOLD_FRACTION,
                                    GoalFailed, Trainer, TrainProgress, TrainSpec)
@@ -86,10 +87,17 @@ class LearnerNode(Node):
         checkpoint_interval = declare(self, "checkpoint_interval", 5_000,
                                       "training env steps between checkpoints of a Train goal",
                                       min_value=1, max_value=10_000_000)
+        recipe = declare(self, "fine_tuning", DEFAULT_RECIPE, "how a Train goal trains the stored model it starts "
+                         f"from: one of {', '.join(FINE_TUNING_RECIPES)} (learner_node/sac_settings.py)")
+        try:
+            fine_tuning = fine_tuning_recipe(recipe)
+        except ValueError as error:
+            raise ValueError(f"parameter fine_tuning: {error}") from None
 
         self.policies = PolicyRegistry(PolicyStore(Path(policy_dir)), [PolicyStore(assets_dir() / "priors")], seed)
         self.sim = SimClient(self, timeout_sec=self.sim_timeout)
-        self.trainer = Trainer(self.sim, self.policies, Path(policy_dir) / ".checkpoints", seed, checkpoint_interval)
+        self.trainer = Trainer(self.sim, self.policies, Path(policy_dir) / ".checkpoints", seed, checkpoint_interval,
+                               fine_tuning=fine_tuning)
         # Whoever holds sim_lock runs the queued jobs: a training goal between
         # its steps, otherwise the requester itself.
         self.sim_lock = threading.Lock()
@@ -211,7 +219,7 @@ class LearnerNode(Node):
                     on_progress=lambda progress: self._publish_progress(goal_handle, spec, progress),
                     should_stop=lambda: self._stop_reason(goal_handle),
                     between_steps=self.run_jobs,
-                    on_evaluation=lambda score: self._publish_evaluation(
+                    on_evaluation=lambda score, steps: self._publish_evaluation(
                         spec.output_policy, [TaskScore(task=score.task, successes=score.successes,
                                                        episodes=score.episodes)], "train"),
                 )

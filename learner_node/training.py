@@ -26,9 +26,11 @@ order of one step); around it:
 Choices:
 - A goal starts from the stored model with an empty replay buffer (what
   loading an SB3 model gives), and updates start once a batch of
-  transitions is in it. ``keep_replay_buffer`` continues the previous goal's
-  model and buffer instead, when the goal starts from that goal's output:
-  the baselines train one policy through many short goals.
+  transitions is in it; what it acts with until then, its batch and its
+  learning rate are the trainer's ``FineTuning`` (``learner_node.sac_settings``).
+  ``keep_replay_buffer`` continues the previous goal's model and buffer
+  instead, when the goal starts from that goal's output: the baselines
+  train one policy through many short goals.
 - Only training env steps count against the budget; evaluation steps do not
   (the paper counts training timesteps).
 - SB3 steps the N envs together, so a goal trains whole vector steps and
@@ -64,7 +66,7 @@ from learner_node.evaluation import Score, evaluate
 from learner_node.policies import RANDOM_POLICY, PolicyRegistry
 from learner_node.policy_store import PolicyRecord, check_name
 from learner_node.replay_buffer import load_replay_buffer, save_replay_buffer
-from learner_node.sac_settings import SAC_KWARGS, SCHEDULE_KEYS, TORCH_THREADS
+from learner_node.sac_settings import DEFAULT_FINE_TUNING, SAC_KWARGS, TORCH_THREADS, FineTuning
 from learner_node.updates import OverlappedUpdates
 from learner_node.vec_env import BatchVecEnv, TaskCycle
 
@@ -168,8 +170,10 @@ class Trainer:
     """Runs Train goals on ``envs`` with the policies of ``policies``."""
 
     def __init__(self, envs: BatchStepper, policies: PolicyRegistry, checkpoint_root: Path, seed: int = 0,
-                 checkpoint_interval: int = 5_000, progress_interval_sec: float = 1.0):
+                 checkpoint_interval: int = 5_000, progress_interval_sec: float = 1.0,
+                 fine_tuning: FineTuning = DEFAULT_FINE_TUNING):
         self.envs = envs
+        self.fine_tuning = fine_tuning
         self.policies = policies
         self.checkpoint_root = Path(checkpoint_root)
         self.seed = seed
@@ -184,13 +188,13 @@ class Trainer:
         on_progress: Callable[[TrainProgress], None] = lambda progress: None,
         should_stop: Callable[[], str] = lambda: "",
         between_steps: Callable[[], bool] = lambda: False,
-        on_evaluation: Callable[[Score], None] = lambda score: None,
+        on_evaluation: Callable[[Score, int], None] = lambda score, steps: None,
     ) -> TrainOutcome:
         """Run ``spec`` to its end; ``should_stop`` returns a reason to stop early ("" to go on).
 
         ``on_evaluation`` hears every evaluation of ``spec.task`` the goal runs (the check before
-        the first step, each interval, the end) as soon as it is scored: the record of what the
-        goal's decisions were based on.
+        the first step, each interval, the end) as soon as it is scored, with the goal's training
+        steps it scored the policy after: the record of what the goal's decisions were based on.
         """
         import torch
 
@@ -235,7 +239,7 @@ class Trainer:
         if saved is not None and saved["spec"] == _spec_key(spec):
             model = SAC.load(checkpoint_dir / saved["model"], env=vec_env, device="cpu")
             if not load_replay_buffer(model.replay_buffer, checkpoint_dir / saved["buffer"]):
-                model.learning_starts = model.num_timesteps + SAC_KWARGS["batch_size"]
+                self._start_with_empty_buffer(model)
             state.__dict__.update(saved["state"])
             restore_random_state(model, saved["random_state"])
             cycle.position = saved["task_position"]
@@ -246,9 +250,21 @@ class Trainer:
             model.set_env(vec_env, force_reset=True)
             return model, 0
         model = SAC.load(store_path, env=vec_env, device="cpu")
-        # An empty buffer: update once a batch of this goal's transitions is in.
-        model.learning_starts = model.num_timesteps + SAC_KWARGS["batch_size"]
+        self._start_with_empty_buffer(model)
         return model, 0
+
+    def _start_with_empty_buffer(self, model) -> None:
+        """Act as ``fine_tuning.first_actions`` says until a batch is in (``OverlappedUpdates`` waits for it)."""
+        first_batch = self.fine_tuning.batch_size if self.fine_tuning.first_actions == "random" else 0
+        model.learning_starts = model.num_timesteps + first_batch
+
+    def _tune(self, model) -> None:
+        """The goal's schedule on whichever model it trains (stored, checkpointed or warm)."""
+        model.batch_size = self.fine_tuning.batch_size
+        model.gradient_steps = SAC_KWARGS["gradient_steps"]
+        if self.fine_tuning.learning_rate is not None:
+            model.learning_rate = self.fine_tuning.learning_rate
+            model._setup_lr_schedule()  # SB3's optimisers read the rate from the schedule at each update
 
     def _seeded(self, spec: TrainSpec, model, vec_env: BatchVecEnv, resumed: int) -> None:
         """Seed the goal's random streams: SAC's sampling and, for a seeded goal, its sim episodes.
@@ -292,7 +308,7 @@ class Trainer:
         model._last_episode_starts = np.ones(vec_env.num_envs, dtype=bool)
 
     def _evaluate_task(self, model, spec: TrainSpec, state: _GoalState, steps: int,
-                       on_evaluation: Callable[[Score], None]) -> None:
+                       on_evaluation: Callable[[Score, int], None]) -> None:
         """Score ``model`` on the goal's task as the policy after ``steps`` of the goal's training steps."""
         seed = None if spec.seed is None else derived_seed(spec.seed, EVALUATION_STREAM, steps)
         (score,) = evaluate(self.envs, lambda obs: model.predict(obs, deterministic=True)[0], [spec.task],
@@ -301,7 +317,7 @@ class Trainer:
         state.score = asdict(score)
         state.learned = passes_threshold(score.successes, spec.threshold)
         state.steps_at_last_eval = steps
-        on_evaluation(score)
+        on_evaluation(score, steps)
 
     def _store(self, spec: TrainSpec, model, state: _GoalState) -> PolicyRecord:
         parent = self.policies.record(spec.initial_policy)
@@ -362,7 +378,7 @@ class _Goal:
 
     def __init__(self, trainer: "Trainer", spec: TrainSpec, on_progress: Callable[[TrainProgress], None],
                  should_stop: Callable[[], str], between_steps: Callable[[], bool],
-                 on_evaluation: Callable[[Score], None]):
+                 on_evaluation: Callable[[Score, int], None]):
         self.trainer, self.spec = trainer, spec
         self.on_progress, self.should_stop, self.owner_between_steps = on_progress, should_stop, between_steps
         self.on_evaluation = on_evaluation
@@ -373,8 +389,7 @@ class _Goal:
                                    global_step=lambda: trainer.total_steps, between_steps=self.between_steps)
         self.model, self.resumed = trainer._model(spec, self.vec_env, self.checkpoint_dir, self.state, self.cycle)
         trainer._seeded(spec, self.model, self.vec_env, self.resumed)
-        for key in SCHEDULE_KEYS:
-            setattr(self.model, key, SAC_KWARGS[key])
+        trainer._tune(self.model)
         self.updates = OverlappedUpdates(self.model)
         self.vec_env.while_stepping = self.updates.pay
         self.start_timesteps = self.model.num_timesteps - self.state.steps_used  # the model's count at step 0

@@ -40,8 +40,15 @@ class OverlappedUpdates:
             self.model.gradient_steps = self._gradient_steps
 
     def owe(self, env_steps: int) -> None:
-        """After a vector step of ``env_steps`` that SB3 would follow with updates: what it would do."""
-        if self.model.num_timesteps > self.model.learning_starts:
+        """After a vector step of ``env_steps`` that SB3 would follow with updates: what it would do.
+
+        SB3 starts updating after ``learning_starts``; a goal that acts with its
+        policy from the first step (``learning_starts`` at the goal's start) also
+        waits until the buffer holds a batch: SB3 would sample one from fewer rows.
+        """
+        buffer = self.model.replay_buffer
+        transitions = (buffer.buffer_size if buffer.full else buffer.pos) * buffer.n_envs
+        if self.model.num_timesteps > self.model.learning_starts and transitions >= self.model.batch_size:
             self.owed += self._gradient_steps if self._gradient_steps >= 0 else env_steps
 
     def pay(self) -> None:

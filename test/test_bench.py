@@ -1,9 +1,13 @@
-"""`glocal-ros bench learner` with tiny numbers: the table's shape, never its timings."""
+"""`glocal-ros bench learner` and `bench transfer` with tiny numbers: the tables' shape, never timings or scores."""
 
 from pathlib import Path
 
-from glocal_app.cli import build_parser, cmd_bench_learner
+import pytest
+
 from glocal_app.benches.learner import LearnerBenchRow, learner_bench_report, run_learner_bench
+from glocal_app.benches.transfer import (TransferGoal, TransferSettings, run_transfer_bench, run_transfer_graph,
+                                        transfer_bench_report)
+from glocal_app.cli import build_parser, cmd_bench_learner, cmd_bench_transfer
 
 
 def test_bench_learner_reports_one_row_per_env_count():
@@ -42,3 +46,71 @@ def test_bench_learner_command_line():
                                       "--no-learner-node", "--out", "x.md"])
     assert args.func is cmd_bench_learner
     assert (args.envs, args.steps, args.rounds, args.no_learner_node, args.out) == ("1,2", 100, 2, True, Path("x.md"))
+
+
+def test_bench_transfer_runs_every_recipe_on_the_same_episodes_and_tabulates_them():
+    """Real goals in spawned workers, tiny: 2 recipes x 1 task x 1 seed, budget 8, an evaluation every 4 steps."""
+    settings = TransferSettings(step_budget=8, eval_interval=4, eval_episodes=2, num_envs=2)
+    log: list[str] = []
+    goals = run_transfer_bench(["random-first", "policy-first"], ["A0"], [5], settings, jobs=2, log=log.append)
+
+    assert [(g.recipe, g.task, g.seed) for g in goals] == [("random-first", "A0", 5), ("policy-first", "A0", 5)]
+    for goal in goals:
+        assert [steps for steps, _ in goal.curve] == [0, 4, 8]
+        assert all(0 <= score <= 2 for _, score in goal.curve) and goal.wall_s > 0
+    assert goals[0].start == goals[1].start, "both recipes start from the prior on the same episodes"
+    assert len(log) == 2
+
+    report = transfer_bench_report(goals, "glocal-ros bench transfer --tasks A0", settings, jobs=2)
+    assert report.startswith("# bench transfer")
+    assert "Command: `glocal-ros bench transfer --tasks A0`" in report
+    rows = [line for line in report.splitlines() if line.startswith(("| random-first |", "| policy-first |"))]
+    assert len(rows) == 4  # one summary row and one goal row per recipe
+    assert all(line.count("|") == 9 for line in rows[:2])  # eight summary columns
+    assert all(line.count("|") == 10 for line in rows[2:])  # recipe, task, seed, 3 scores, steps to B, drop, s
+
+    # The same goals through a sim_node and a learner_node: the same episodes, so the same start.
+    (through_graph,) = run_transfer_graph(["policy-first"], ["A0"], [5], settings, log=log.append)
+    assert (through_graph.recipe, through_graph.task, through_graph.seed) == ("policy-first", "A0", 5)
+    assert [steps for steps, _ in through_graph.curve] == [0, 4, 8]
+    assert through_graph.start == goals[1].start
+    assert "through the graph" in transfer_bench_report([through_graph], "x", settings, jobs=1, graph=True)
+
+
+def test_a_transfer_curve_gives_steps_to_b_and_collapse():
+    def goal(*curve):
+        return TransferGoal("r", "A1", 0, tuple(curve), eval_episodes=20, threshold=15, wall_s=1.0)
+
+    recovered = goal((0, 12), (500, 9), (1000, 16), (1500, 7), (2000, 18))
+    assert recovered.steps_to_b == 1000  # the first score above B
+    assert recovered.drop_points == 25.0 and recovered.collapsed  # 12 -> 7 after 1k steps: 25 points of 100
+    early_dip = goal((0, 12), (500, 2), (1000, 12))
+    assert early_dip.drop_points == 0 and not early_dip.collapsed  # the first 1k steps do not count
+    assert early_dip.steps_to_b is None
+    assert goal((0, 16), (1000, 17)).steps_to_b == 0  # a prior above B already
+
+
+@pytest.mark.parametrize("change, message", [
+    (dict(recipes=["rlpd"]), "unknown fine-tuning recipe"),
+    (dict(tasks=["Z9"]), "Z9"),
+    (dict(settings=TransferSettings(step_budget=1000, eval_interval=300)), "multiple of the envs"),
+    (dict(settings=TransferSettings(eval_episodes=0)), "at least 1"),
+    (dict(seeds=[]), "a seed"),
+    (dict(seeds=[1, 1]), "must not repeat"),
+    (dict(seeds=[-1]), "seeds must lie in"),
+])
+def test_bench_transfer_refuses_bad_input_before_any_goal_runs(change, message):
+    arguments = dict(recipes=["random-first"], tasks=["A0"], seeds=[0], settings=TransferSettings(), jobs=1)
+    arguments.update(change)
+    ran: list[str] = []
+    with pytest.raises(ValueError, match=message):
+        run_transfer_bench(**arguments, log=ran.append)
+    assert ran == []
+
+
+def test_bench_transfer_command_line():
+    args = build_parser().parse_args(["bench", "transfer", "--recipes", "policy-first", "--tasks", "A0,B1",
+                                      "--seeds", "0,1", "--budget", "1000", "--eval-interval", "250", "--jobs", "1"])
+    assert args.func is cmd_bench_transfer
+    assert (args.recipes, args.tasks, args.seeds, args.budget, args.eval_interval, args.eval_episodes, args.envs,
+            args.out) == ("policy-first", "A0,B1", "0,1", 1000, 250, 20, 4, Path("bench/results/transfer.md"))

@@ -93,3 +93,10 @@ def test_copy_policy_into_the_store(learner, ros_node, policy_dir):
         assert response.error == kind, (source, destination, response.error)
     response = call(evaluate, Evaluate.Request(policy="A0_learned", tasks=["A0"], episodes=2, seed=1))
     assert response.success and process.process.poll() is None
+
+
+def test_an_unknown_fine_tuning_recipe_stops_the_node_naming_the_parameter_and_the_choices(start_node, tmp_path):
+    node = start_node("learner_node", policy_dir=str(tmp_path / "policies"), fine_tuning="rlpd")
+    assert node.process.wait(120) == 1
+    assert "parameter fine_tuning: unknown fine-tuning recipe 'rlpd': choose from random-first, policy-first" \
+        in node.log()

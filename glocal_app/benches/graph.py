@@ -70,14 +70,14 @@ def burners(on: bool) -> Iterator[None]:
 
 
 @contextmanager
-def multithreaded_node(name: str, domain_id: int, threads: int = 4):
+def multithreaded_node(name: str, domain_id: int, threads: int = 4, namespace: str = ""):
     """A node spun by a MultiThreadedExecutor in the background, as the curriculum node's is."""
     import rclpy
     from rclpy.executors import MultiThreadedExecutor
 
     context = rclpy.Context()
     rclpy.init(context=context, domain_id=domain_id)
-    node = rclpy.create_node(name, context=context)
+    node = rclpy.create_node(name, context=context, namespace=namespace)
     executor = MultiThreadedExecutor(threads, context=context)
     executor.add_node(node)
     spinner = threading.Thread(target=executor.spin, daemon=True)

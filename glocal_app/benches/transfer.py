@@ -1,0 +1,330 @@
+"""``glocal-ros bench transfer``: how Train goals fine-tune the A0 prior on other objects.
+
+For each fine-tuning recipe (``learner_node.sac_settings.FINE_TUNING_RECIPES``),
+task and seed, one seeded Train goal from the shipped ``prior`` with the same
+step budget, scored every ``eval_interval`` training steps on
+``eval_episodes`` deterministic episodes (the paper's score), and never
+stopped when learned, so that the whole curve is seen. Per goal it records:
+
+- the curve: the score at step 0 (the prior, on the episodes the goal's own
+  step-0 evaluation would use) and at every interval;
+- steps-to-B: the first step whose score passes B (``passes_threshold``),
+  none when no evaluation did;
+- the drop: how far the lowest score from ``COLLAPSE_AFTER`` steps on fell
+  below the start, in points of 100; a drop of ``COLLAPSE_POINTS`` or more
+  is a collapse (the score was there before training and training lost it);
+- wall-clock of the goal (its evaluations included).
+
+Goals with the same task and seed run the same episodes under every recipe
+(the goal's seed derives every stream, ``learner_node.training``), so the
+recipes are compared pairwise on equal footing. The goals run in-process
+(the ``Trainer`` on a ``BatchedEnvs``, no ROS), ``jobs`` at a time in worker
+processes, interleaved by recipe so that load on the shared machine hits all
+recipes alike.
+
+``--graph`` runs the same goals through the graph: per recipe a sim_node and
+a learner_node process (its ``fine_tuning`` parameter set to the recipe), in
+a namespace of their own, sent the goals by the curriculum's ``RosLearner``;
+the recipes' pairs run at once. The start is the prior scored by
+``learner/evaluate`` on the same episodes, the curve the goal's evaluations
+on ``glocal/evaluations`` (the k-th one at k intervals: the settings make
+every evaluation fall exactly on its step).
+"""
+
+from __future__ import annotations
+
+import math
+import os
+import shutil
+import statistics
+import sys
+import tempfile
+import time
+from concurrent.futures import ProcessPoolExecutor, ThreadPoolExecutor
+from dataclasses import dataclass
+from multiprocessing import get_context
+from pathlib import Path
+from typing import Callable, Sequence
+
+from glocal_ros.curriculum.learner import passes_threshold
+from glocal_ros.seeds import MAX_SEED
+from glocal_ros.tasks import validate_tasks
+
+#: Eight cells over the grid: every row letter and every column digit at least once.
+TRANSFER_TASKS = ("A6", "B1", "C4", "D3", "E0", "E5", "F2", "G6")
+INITIAL_POLICY = "prior"
+#: A collapse: from this many training steps on, a score this many points of 100 below the start.
+COLLAPSE_AFTER = 1_000
+COLLAPSE_POINTS = 25.0
+
+
+@dataclass(frozen=True)
+class TransferSettings:
+    """What every goal of one bench run shares."""
+
+    step_budget: int = 3_000
+    eval_interval: int = 500
+    eval_episodes: int = 20
+    threshold_fraction: float = 0.75  # B as a share of eval_episodes: the paper's 75 of 100
+    num_envs: int = 4
+
+    @property
+    def threshold(self) -> float:
+        return self.threshold_fraction * self.eval_episodes
+
+    def check(self) -> None:
+        """Raise ``ValueError`` before anything runs, with what to change."""
+        if min(self.step_budget, self.eval_interval, self.eval_episodes, self.num_envs) < 1:
+            raise ValueError("the budget, evaluation interval, evaluation episodes and envs must be at least 1")
+        if self.eval_interval % self.num_envs or self.step_budget % self.eval_interval:
+            raise ValueError(f"the evaluation interval ({self.eval_interval}) must be a multiple of the envs "
+                             f"({self.num_envs}) and divide the budget ({self.step_budget}): every evaluation "
+                             "then falls exactly on its step")
+        if not 0 <= self.threshold_fraction < 1:
+            raise ValueError(f"the threshold fraction must lie in [0, 1), got {self.threshold_fraction}")
+
+
+@dataclass(frozen=True)
+class TransferGoal:
+    recipe: str
+    task: str
+    seed: int
+    curve: tuple[tuple[int, int], ...]  # (training steps, successes), from step 0
+    eval_episodes: int
+    threshold: float
+    wall_s: float
+
+    @property
+    def start(self) -> int:
+        return self.curve[0][1]
+
+    @property
+    def final(self) -> int:
+        return self.curve[-1][1]
+
+    @property
+    def steps_to_b(self) -> int | None:
+        return next((steps for steps, score in self.curve if passes_threshold(score, self.threshold)), None)
+
+    @property
+    def drop_points(self) -> float:
+        """How far the lowest score from ``COLLAPSE_AFTER`` steps on lies below the start, in points of 100."""
+        later = [score for steps, score in self.curve if steps >= COLLAPSE_AFTER]
+        return max(0.0, 100.0 * (self.start - min(later)) / self.eval_episodes) if later else 0.0
+
+    @property
+    def collapsed(self) -> bool:
+        return self.drop_points >= COLLAPSE_POINTS
+
+
+def run_goal(recipe: str, task: str, seed: int, settings: TransferSettings) -> TransferGoal:
+    """One seeded goal from the prior in this process, on envs of its own; its curve and wall-clock."""
+    from glocal_ros.paths import assets_dir
+    from glocal_ros.seeds import derived_seed
+    from learner_node.evaluation import evaluate
+    from learner_node.policies import PolicyRegistry
+    from learner_node.policy_store import PolicyStore
+    from learner_node.sac_settings import fine_tuning_recipe
+    from learner_node.training import EVALUATION_STREAM, Trainer, TrainSpec
+    from sim_node.batch import BatchedEnvs
+    from sim_node.grasp_env import GraspEnv
+
+    work = Path(tempfile.mkdtemp(prefix="glocal-bench-transfer-"))
+    envs = BatchedEnvs(lambda i: GraspEnv(task), settings.num_envs, task)
+    try:
+        policies = PolicyRegistry(PolicyStore(work / "policies"), [PolicyStore(assets_dir() / "priors")], seed=seed)
+        started = time.perf_counter()
+        # The episodes the goal's own step-0 evaluation would score (Trainer._evaluate_task's seed).
+        (start,) = evaluate(envs, policies.load(INITIAL_POLICY), [task], settings.eval_episodes,
+                            seed=derived_seed(seed, EVALUATION_STREAM, 0))
+        curve = [(0, start.successes)]
+        trainer = Trainer(envs, policies, work / "checkpoints", seed, checkpoint_interval=10**12,
+                          fine_tuning=fine_tuning_recipe(recipe))
+        trainer.train(TrainSpec(task=task, initial_policy=INITIAL_POLICY, output_policy="transfer",
+                                step_budget=settings.step_budget, threshold=settings.threshold,
+                                eval_episodes=settings.eval_episodes, eval_interval=settings.eval_interval,
+                                seed=seed),
+                      on_evaluation=lambda score, steps: curve.append((steps, score.successes)))
+        return TransferGoal(recipe, task, seed, tuple(curve), settings.eval_episodes, settings.threshold,
+                            time.perf_counter() - started)
+    finally:
+        envs.close()
+        shutil.rmtree(work, ignore_errors=True)
+
+
+def _run_goal(job: tuple[str, str, int, TransferSettings]) -> TransferGoal:
+    return run_goal(*job)
+
+
+def run_transfer_bench(recipes: Sequence[str], tasks: Sequence[str], seeds: Sequence[int],
+                       settings: TransferSettings, jobs: int = 1,
+                       log: Callable[[str], None] = print) -> list[TransferGoal]:
+    """Every (recipe, task, seed) goal, ``jobs`` at a time; in the order task, seed, recipe."""
+    _check(recipes, tasks, seeds, settings, jobs)
+    work = [(recipe, task, seed, settings) for task in tasks for seed in seeds for recipe in recipes]
+    goals = []
+    # Spawned workers: pybullet and torch do not survive a fork of a process that uses them.
+    with ProcessPoolExecutor(max_workers=jobs, mp_context=get_context("spawn")) as pool:
+        for goal in pool.map(_run_goal, work):
+            log(_goal_line(goal))
+            goals.append(goal)
+    return goals
+
+
+def _check(recipes: Sequence[str], tasks: Sequence[str], seeds: Sequence[int], settings: TransferSettings,
+           jobs: int) -> None:
+    """Raise ``ValueError`` for anything that would fail later, before any goal runs."""
+    from learner_node.sac_settings import fine_tuning_recipe
+
+    for recipe in recipes:
+        fine_tuning_recipe(recipe)
+    validate_tasks(list(tasks))
+    settings.check()
+    if not recipes or not tasks or not seeds or jobs < 1:
+        raise ValueError("bench transfer needs a recipe, a task, a seed and at least one job")
+    if len(set(recipes)) != len(recipes) or len(set(tasks)) != len(tasks) or len(set(seeds)) != len(seeds):
+        raise ValueError("recipes, tasks and seeds must not repeat")
+    if not all(0 <= seed <= MAX_SEED for seed in seeds):
+        raise ValueError(f"seeds must lie in 0..{MAX_SEED}, got {list(seeds)}")
+
+
+def _goal_line(goal: TransferGoal) -> str:
+    return (f"{goal.recipe} {goal.task} seed {goal.seed}: " + " ".join(f"{s}:{score}" for s, score in goal.curve)
+            + f" (steps to B {goal.steps_to_b if goal.steps_to_b is not None else '-'}, "
+            f"drop {goal.drop_points:.0f} points, {goal.wall_s:.0f} s)")
+
+
+def run_transfer_graph(recipes: Sequence[str], tasks: Sequence[str], seeds: Sequence[int],
+                       settings: TransferSettings, log: Callable[[str], None] = print) -> list[TransferGoal]:
+    """The goals of ``run_transfer_bench`` through sim_node + learner_node processes, one pair per recipe."""
+    import threading
+    from contextlib import ExitStack
+
+    from glocal_interfaces.msg import EvaluationResult
+
+    from curriculum_node.ros_learner import RosLearner
+    from glocal_app.benches.graph import multithreaded_node
+    from glocal_app.processes import NodeProcess, isolated_environment
+    from glocal_ros.curriculum.learner import TrainRequest
+    from glocal_ros.domain import reserve_domain_id
+    from glocal_ros.seeds import derived_seed
+    from learner_node.training import EVALUATION_STREAM
+    from node_common import names, qos
+
+    _check(recipes, tasks, seeds, settings, 1)
+    domain_id, lock = reserve_domain_id()
+    work = Path(tempfile.mkdtemp(prefix="glocal-bench-transfer-graph-"))
+    env = isolated_environment(domain_id, work / "logs")
+    timeout = 600.0
+    stack = ExitStack()
+
+    def pair(index: int, recipe: str) -> Callable[[], list[TransferGoal]]:
+        namespace = f"/transfer{index}"
+        remap = ("-r", f"__ns:={namespace}")
+        processes = [NodeProcess("sim_node", work / "logs", {"num_envs": settings.num_envs, "initial_task": tasks[0]},
+                                 env=env, extra_args=remap),
+                     NodeProcess("learner_node", work / "logs",
+                                 {"policy_dir": str(work / f"policies{index}"), "fine_tuning": recipe, "seed": 0,
+                                  "checkpoint_interval": 10_000_000}, env=env, extra_args=remap)]
+        stack.callback(lambda: [process.stop() for process in reversed(processes)])
+        node = stack.enter_context(multithreaded_node(f"bench_transfer{index}", domain_id, namespace=namespace))
+        scores: dict[str, list[int]] = {}
+        heard = threading.Condition()
+
+        def on_evaluation(message: EvaluationResult) -> None:
+            if message.purpose == "train":
+                with heard:
+                    scores.setdefault(message.policy, []).extend(s.successes for s in message.scores)
+                    heard.notify_all()
+
+        node.create_subscription(EvaluationResult, names.EVALUATIONS, on_evaluation, qos.EVENTS)
+        learner = RosLearner(node, timeout_sec=timeout)
+
+        def goals() -> list[TransferGoal]:
+            learner.wait_for_learner()
+            done = []
+            for task in tasks:
+                for seed in seeds:
+                    output = f"transfer-{task}-{seed}"
+                    started = time.perf_counter()
+                    start = learner.evaluate(INITIAL_POLICY, [task], settings.eval_episodes,
+                                             seed=derived_seed(seed, EVALUATION_STREAM, 0))[task]
+                    learner.train(TrainRequest(task, INITIAL_POLICY, output, settings.step_budget,
+                                               threshold=settings.threshold, eval_episodes=settings.eval_episodes,
+                                               eval_interval=settings.eval_interval, stop_when_learned=False,
+                                               seed=seed))
+                    wall_s = time.perf_counter() - started
+                    expected = settings.step_budget // settings.eval_interval
+                    with heard:  # the last evaluation's message may trail the result
+                        if not heard.wait_for(lambda: len(scores.get(output, ())) >= expected, timeout):
+                            raise RuntimeError(f"{recipe}: {len(scores.get(output, ()))} of {expected} evaluations "
+                                               f"of {output} heard; see the logs in {work / 'logs'}")
+                        curve = [(0, int(start))] + [((k + 1) * settings.eval_interval, score)
+                                                     for k, score in enumerate(scores[output][:expected])]
+                    goal = TransferGoal(recipe, task, seed, tuple(curve), settings.eval_episodes,
+                                        settings.threshold, wall_s)
+                    log(_goal_line(goal))
+                    done.append(goal)
+            return done
+
+        return goals
+
+    try:
+        runs = [pair(index, recipe) for index, recipe in enumerate(recipes)]
+        with ThreadPoolExecutor(len(runs)) as pool:
+            per_recipe = list(pool.map(lambda run: run(), runs))
+    finally:
+        stack.close()
+        lock.close()
+    order = {(task, seed): i for i, (task, seed) in enumerate((t, s) for t in tasks for s in seeds)}
+    return sorted((g for goals in per_recipe for g in goals), key=lambda g: order[(g.task, g.seed)])
+
+
+def _median_steps_to_b(goals: Sequence[TransferGoal]) -> float:
+    """Median with the goals that never passed B counted as infinitely slow."""
+    return statistics.median(math.inf if g.steps_to_b is None else g.steps_to_b for g in goals)
+
+
+def transfer_bench_report(goals: Sequence[TransferGoal], command: str, settings: TransferSettings,
+                          jobs: int, graph: bool = False) -> str:
+    recipes = list(dict.fromkeys(g.recipe for g in goals))
+    tasks = list(dict.fromkeys(g.task for g in goals))
+    seeds = sorted({g.seed for g in goals})
+    lines = [
+        "# bench transfer: fine-tuning the A0 prior, recipe by recipe",
+        "",
+        f"Command: `{command}`  ",
+        f"{time.strftime('%Y-%m-%d %H:%M')}, Python {sys.version.split()[0]}, {os.cpu_count()} CPU cores, "
+        + ("through the graph (a sim_node and a learner_node per recipe, the recipes at once)" if graph else
+           f"in-process, {jobs} goal{'s' if jobs != 1 else ''} at a time")
+        + f". Load average at the end {os.getloadavg()[0]:.1f} (the machine is shared). One seeded Train goal "
+        f"per recipe, task and seed from `{INITIAL_POLICY}`: {settings.step_budget} training steps on "
+        f"{settings.num_envs} envs, scored every "
+        f"{settings.eval_interval} steps over {settings.eval_episodes} deterministic episodes, not stopped when "
+        f"learned; B = {settings.threshold:g}. Tasks {', '.join(tasks)}; seeds {', '.join(map(str, seeds))}. "
+        f"Steps to B: the first evaluation above B (a prior already above it: 0); the median counts a goal "
+        f"that never passed as slower than all. Collapse: a score {COLLAPSE_POINTS:g} or more points of 100 "
+        f"below the start from step {COLLAPSE_AFTER} on. Wall-clock per goal includes its evaluations.",
+        "",
+        "| recipe | goals | passed B | median steps to B | collapses | median drop (points) | median final score "
+        "| median wall-clock per goal (s) |",
+        "| --- | ---: | ---: | ---: | ---: | ---: | ---: | ---: |",
+    ]
+    for recipe in recipes:
+        mine = [g for g in goals if g.recipe == recipe]
+        median = _median_steps_to_b(mine)
+        lines.append(
+            f"| {recipe} | {len(mine)} | {sum(g.steps_to_b is not None for g in mine)} "
+            f"| {'never' if math.isinf(median) else f'{median:.0f}'} | {sum(g.collapsed for g in mine)} "
+            f"| {statistics.median(g.drop_points for g in mine):.0f} "
+            f"| {statistics.median(g.final for g in mine):.0f} / {settings.eval_episodes} "
+            f"| {statistics.median(g.wall_s for g in mine):.0f} |")
+    steps = [s for s, _ in goals[0].curve] if goals else []
+    lines += ["", "Every goal (scores out of " f"{settings.eval_episodes} at each step):", "",
+              "| recipe | task | seed | " + " | ".join(str(s) for s in steps) + " | steps to B | drop | s |",
+              "| --- | --- | ---: | " + " | ".join("---:" for _ in steps) + " | ---: | ---: | ---: |"]
+    for g in goals:
+        lines.append(f"| {g.recipe} | {g.task} | {g.seed} | " + " | ".join(str(score) for _, score in g.curve)
+                     + f" | {'-' if g.steps_to_b is None else g.steps_to_b} | {g.drop_points:.0f} "
+                     f"| {g.wall_s:.0f} |")
+    return "\n".join(lines) + "\n"
