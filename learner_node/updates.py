@@ -47,8 +47,8 @@ class OverlappedUpdates:
         waits until the buffer holds a batch: SB3 would sample one from fewer rows.
         """
         buffer = self.model.replay_buffer
-        transitions = (buffer.buffer_size if buffer.full else buffer.pos) * buffer.n_envs
-        if self.model.num_timesteps > self.model.learning_starts and transitions >= self.model.batch_size:
+        batch_in = buffer.size() * buffer.n_envs >= self.model.batch_size  # size(): rows of n_envs transitions
+        if self.model.num_timesteps > self.model.learning_starts and batch_in:
             self.owed += self._gradient_steps if self._gradient_steps >= 0 else env_steps
 
     def pay(self) -> None:
