@@ -13,13 +13,13 @@ import sys
 from pathlib import Path
 
 from glocal_app.bag_cli import add_bag_commands
-from glocal_app.benches.transfer import TRANSFER_TASKS, TransferSettings
+from glocal_app.benches.transfer import INITIAL_POLICY, TRANSFER_TASKS, TransferSettings
 from glocal_app.nodes import NODES
 from glocal_ros.curriculum.codes import STRATEGY_NAMES
 from glocal_ros.curriculum.learner import passes_threshold
 from glocal_ros.paths import assets_dir, objects_dir
 from glocal_ros.tasks import parse_task_list, sorted_tasks
-from learner_node.sac_settings import FINE_TUNING_RECIPES
+from learner_node.sac_settings import DEFAULT_NETWORK, EXPERIENCE_TRANSITIONS, FINE_TUNING_RECIPES, NETWORKS
 
 #: The ament package that installs the nodes' executables.
 PACKAGE = "glocal_ros"
@@ -176,25 +176,29 @@ def cmd_bench_transfer(args: argparse.Namespace) -> int:
     settings = TransferSettings(step_budget=args.budget, eval_interval=args.eval_interval,
                                 eval_episodes=args.eval_episodes, num_envs=args.envs)
     seeds = [int(seed) for seed in args.seeds.split(",")]
-    recipes, tasks = args.recipes.split(","), args.tasks.split(",")
-    goals = (run_transfer_graph(recipes, tasks, seeds, settings) if args.graph
-             else run_transfer_bench(recipes, tasks, seeds, settings, args.jobs))
+    recipes, tasks, priors = args.recipes.split(","), args.tasks.split(","), args.priors.split(",")
+    arms = dict(priors=priors, prior_store=args.prior_store)
+    goals = (run_transfer_graph(recipes, tasks, seeds, settings, **arms) if args.graph
+             else run_transfer_bench(recipes, tasks, seeds, settings, args.jobs, **arms))
     report = transfer_bench_report(goals, "glocal-ros " + " ".join(sys.argv[1:]), settings, args.jobs, args.graph)
     return write_bench_report(report, args.out)
 
 
 def cmd_train_prior(args: argparse.Namespace) -> int:
-    """Train the A0 prior in-process, evaluate it, store it as `prior` in assets/priors."""
+    """Train the A0 prior in-process, evaluate it, store it (as `prior` in assets/priors by default)."""
     from tqdm import tqdm
 
     from learner_node.evaluation import evaluate
-    from learner_node.policy_store import PolicyRecord, PolicyStore
+    from learner_node.policy_store import PolicyRecord, PolicyStore, check_name
     from learner_node.prior import PriorConfig, train_prior
+    from learner_node.replay_buffer import recent_experience
+    from learner_node.sac_settings import EXPERIENCE_TRANSITIONS
     from sim_node.batch import BatchedEnvs
     from sim_node.grasp_env import GraspEnv
     from sim_node.scripted_grasp import ScriptedGraspPolicy
 
-    config = PriorConfig(max_steps=args.steps, seed=args.seed)
+    check_name(args.name)
+    config = PriorConfig(max_steps=args.steps, seed=args.seed, network=args.network)
     bar = tqdm(total=config.max_steps, unit="step", desc="A0 prior")
 
     def progress(steps: int, success_rate: float) -> None:
@@ -208,17 +212,44 @@ def cmd_train_prior(args: argparse.Namespace) -> int:
     batch = BatchedEnvs(lambda i: GraspEnv(config.task), 2, config.task)
     try:
         (score,) = evaluate(batch, lambda obs: model.predict(obs, deterministic=True)[0], [config.task],
-                            args.eval_episodes, policy_name="prior", seed=args.seed + 1)
+                            args.eval_episodes, policy_name=args.name, seed=args.seed + 1)
     finally:
         batch.close()
-    print(f"prior: {score.successes}/{score.episodes} on {config.task} after {model.num_timesteps} steps")
-    record = PolicyRecord(name="prior", task=config.task, steps_trained=model.num_timesteps,
+    print(f"{args.name}: {score.successes}/{score.episodes} on {config.task} after {model.num_timesteps} steps")
+    record = PolicyRecord(name=args.name, task=config.task, steps_trained=model.num_timesteps,
                           last_score=float(score.successes), last_score_task=config.task,
                           extra={"eval_episodes": score.episodes, "demo_episodes": config.demo_episodes,
-                                 "seed": config.seed})
-    PolicyStore(args.out).save(model, record)
-    print(f"stored in {args.out}/prior")
+                                 "seed": config.seed, "network": config.network})
+    PolicyStore(args.out).save(model, record, recent_experience(model.replay_buffer, EXPERIENCE_TRANSITIONS))
+    print(f"stored in {args.out}/{args.name}")
     return 0 if passes_threshold(score.successes, args.threshold) else 1
+
+
+def cmd_collect_experience(args: argparse.Namespace) -> int:
+    """Give a stored policy experience: it acts on its task as SAC acts in training; the model is unchanged."""
+    from learner_node.policy_store import PolicyStore
+    from learner_node.prior import collect_experience
+    from sim_node.grasp_env import GraspEnv
+
+    if args.transitions < 1:
+        raise ValueError(f"--transitions must be at least 1, got {args.transitions}")
+    source = PolicyStore(args.store)
+    if args.name not in source:
+        raise ValueError(f"no policy {args.name!r} in {source.root}")
+    record = source.record(args.name)
+    out = PolicyStore(args.out or args.store)
+    if out.root.resolve() != source.root.resolve():
+        out.add_copy(source, args.name, args.name)
+    env = GraspEnv(record.task)
+    try:
+        experience = collect_experience(source.load(args.name), env, args.transitions, args.seed)
+    finally:
+        env.close()
+    out.keep_experience(args.name, experience)
+    successes = int((experience["dones"] - experience["timeouts"]).sum())  # episodes that ended by a lift
+    print(f"{args.name}: {len(experience['dones'])} transitions on {record.task}, {successes} successful "
+          f"episodes, kept in {out.root}/{args.name}")
+    return 0
 
 
 def build_parser() -> argparse.ArgumentParser:
@@ -294,6 +325,11 @@ def build_parser() -> argparse.ArgumentParser:
         "transfer", help="fine-tuning the A0 prior on other objects: steps to B and collapses, recipe by recipe")
     bench_transfer.add_argument("--recipes", default=",".join(FINE_TUNING_RECIPES),
                                 help=f"comma-separated fine-tuning recipes, of {', '.join(FINE_TUNING_RECIPES)}")
+    bench_transfer.add_argument("--priors", default=INITIAL_POLICY,
+                                help="comma-separated stored policies the goals start from (each recipe from each)")
+    bench_transfer.add_argument("--prior-store", type=Path, default=None,
+                                help="a policy store searched for the priors before assets/priors "
+                                     "(train-prior --out)")
     bench_transfer.add_argument("--tasks", default=",".join(TRANSFER_TASKS), help="comma-separated tasks")
     bench_transfer.add_argument("--seeds", default="0,1,2", help="comma-separated goal seeds")
     bench_transfer.add_argument("--budget", type=int, default=transfer_defaults.step_budget,
@@ -306,7 +342,7 @@ def build_parser() -> argparse.ArgumentParser:
     bench_transfer.add_argument("--jobs", type=int, default=os.cpu_count() or 1,
                                 help="goals run at a time in-process")
     bench_transfer.add_argument("--graph", action="store_true",
-                                help="through sim_node + learner_node processes (a pair per recipe, all at once)")
+                                help="through sim_node + learner_node processes (a pair per arm, all at once)")
     bench_transfer.add_argument("--out", type=Path, default=Path("bench/results/transfer.md"))
     bench_transfer.set_defaults(func=cmd_bench_transfer)
 
@@ -317,7 +353,20 @@ def build_parser() -> argparse.ArgumentParser:
     prior.add_argument("--threshold", type=float, default=75, help="B: the prior must score above it")
     prior.add_argument("--work-dir", type=Path, default=Path("build/prior"), help="checkpoints, for resuming")
     prior.add_argument("--out", type=Path, default=None, help="policy store (default: assets/priors)")
+    prior.add_argument("--name", default="prior", help="the policy's name in the store")
+    prior.add_argument("--network", default=DEFAULT_NETWORK, choices=list(NETWORKS),
+                       help="hidden layers and batch of the new model (learner_node/sac_settings.py)")
     prior.set_defaults(func=cmd_train_prior)
+
+    experience = commands.add_parser(
+        "collect-experience", help="give a stored policy experience (for the parent-experience recipe): "
+        "transitions of it acting on its task")
+    experience.add_argument("name", help="the stored policy")
+    experience.add_argument("--store", type=Path, default=None, help="its policy store (default: assets/priors)")
+    experience.add_argument("--out", type=Path, default=None, help="the store to write it to (default: --store)")
+    experience.add_argument("--transitions", type=int, default=EXPERIENCE_TRANSITIONS)
+    experience.add_argument("--seed", type=int, default=0, help="of the first episode; episode k: seed + k")
+    experience.set_defaults(func=cmd_collect_experience)
 
     launch = commands.add_parser("launch", help="run the whole graph as processes on an isolated ROS domain; "
                                  "the same command resumes an interrupted run")
@@ -349,6 +398,8 @@ def main(argv: list[str] | None = None) -> int:
         args.out = objects_dir()
     if args.command == "train-prior" and args.out is None:
         args.out = assets_dir() / "priors"
+    if args.command == "collect-experience" and args.store is None:
+        args.store = assets_dir() / "priors"
     try:
         return args.func(args)
     except ValueError as error:  # bad input (unknown task, ...): a message, not a traceback

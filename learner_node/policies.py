@@ -17,6 +17,7 @@ import numpy as np
 from glocal_ros.spaces import ACTION_DIM
 from learner_node.evaluation import BatchPolicy
 from learner_node.policy_store import PolicyRecord, PolicyStore, UnknownPolicyError, check_name
+from learner_node.replay_buffer import Experience
 
 RANDOM_POLICY = "random"
 
@@ -67,6 +68,10 @@ class PolicyRegistry:
         if name == RANDOM_POLICY:
             raise ValueError(f"{RANDOM_POLICY!r} is built in and has no model")
         return self._store_of(name).model_path(name)
+
+    def experience(self, name: str) -> Experience | None:
+        """The transitions a stored policy keeps (None: none; the built-in ``random`` keeps none)."""
+        return None if name == RANDOM_POLICY else self._store_of(name).experience(name)
 
     def check_writable(self, name: str) -> None:
         """Raise ``ValueError`` unless a goal may write ``name``: a policy of the learner's own store, or new.

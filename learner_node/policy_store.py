@@ -1,10 +1,13 @@
 """Named policies on disk: stable-baselines3 models plus what they are.
 
 Layout: ``<root>/<name>/policy.json`` (metadata, and which model file is
-current) and ``<root>/<name>/model-<version>.zip``. A save writes the new
-model file, then replaces policy.json, each through a temporary file and an
-atomic rename, then deletes the old model file. A process killed at any
-moment leaves policy.json naming a complete model: the old one or the new.
+current), ``<root>/<name>/model-<version>.zip`` and, when the policy keeps
+experience (transitions for a goal that fine-tunes it to start its buffer
+with, ``learner_node.replay_buffer``), ``<root>/<name>/experience-<version>.npz``.
+A save writes the new files, then replaces policy.json, each through a
+temporary file and an atomic rename, then deletes the old files. A process
+killed at any moment leaves policy.json naming complete files: the old ones
+or the new.
 
 ROS-free; loading a model imports stable-baselines3 (and torch) lazily.
 """
@@ -19,12 +22,14 @@ from pathlib import Path
 from typing import Any
 
 from glocal_ros.files import atomic_write
+from learner_node.replay_buffer import Experience, load_experience, save_experience
 
 METADATA_FILE = "policy.json"
 _NAME = re.compile(r"^[A-Za-z0-9_][A-Za-z0-9_.-]{0,127}$")
 #: The only model file names a store writes: a policy.json naming anything else (``../x``, an
 #: absolute path) would make a load read outside the store.
 _MODEL_FILE = re.compile(r"^model-([1-9][0-9]{0,17})\.zip$")
+_EXPERIENCE_FILE = re.compile(r"^experience-[1-9][0-9]{0,17}\.npz$")
 
 
 class UnknownPolicyError(KeyError):
@@ -47,6 +52,7 @@ class PolicyRecord:
     updated: str = field(default_factory=_now)
     model_file: str = ""
     extra: dict[str, Any] = field(default_factory=dict)
+    experience_file: str = ""  # "": the policy keeps no experience
 
 
 def check_name(name: str) -> str:
@@ -75,6 +81,9 @@ class PolicyStore:
         if record.model_file and not _MODEL_FILE.match(record.model_file):
             raise ValueError(f"{path}: model_file {record.model_file!r} is not a model file of this store "
                              f"(model-<N>.zip): refusing to load it")
+        if record.experience_file and not _EXPERIENCE_FILE.match(record.experience_file):
+            raise ValueError(f"{path}: experience_file {record.experience_file!r} is not an experience file "
+                             f"of this store (experience-<N>.npz): refusing to load it")
         return record
 
     def model_path(self, name: str) -> Path:
@@ -86,16 +95,32 @@ class PolicyStore:
 
         return SAC.load(self.model_path(name), device="cpu", **kwargs)
 
-    def save(self, model, record: PolicyRecord) -> PolicyRecord:
-        """Store ``model`` (anything with SB3's ``save``) under ``record.name``, atomically."""
-        return self._store(record, model.save)
+    def experience(self, name: str) -> Experience | None:
+        """The transitions ``name`` keeps; None when it keeps none."""
+        record = self.record(name)
+        return load_experience(self.root / name / record.experience_file) if record.experience_file else None
+
+    def save(self, model, record: PolicyRecord, experience: Experience | None = None) -> PolicyRecord:
+        """Store ``model`` (anything with SB3's ``save``) and ``experience`` under ``record.name``, atomically."""
+        write_experience = None if experience is None else lambda stream: save_experience(experience, stream)
+        return self._store(record, model.save, write_experience)
 
     def add_copy(self, source: "PolicyStore", name: str, destination: str) -> PolicyRecord:
-        """Store a copy of ``source``'s policy ``name`` as ``destination`` (model and metadata)."""
+        """Store a copy of ``source``'s policy ``name`` as ``destination`` (model, experience and metadata)."""
         record = source.record(name)
         model_bytes = source.model_path(name).read_bytes()
+        experience_bytes = (source.root / name / record.experience_file).read_bytes() if record.experience_file \
+            else None
         record.name = destination
-        return self._store(record, lambda stream: stream.write(model_bytes))
+        return self._store(record, lambda stream: stream.write(model_bytes),
+                           None if experience_bytes is None else lambda stream: stream.write(experience_bytes))
+
+    def keep_experience(self, name: str, experience: Experience) -> PolicyRecord:
+        """Store ``experience`` with ``name``'s model, which stays as it is."""
+        record = self.record(name)
+        model_bytes = self.model_path(name).read_bytes()
+        return self._store(record, lambda stream: stream.write(model_bytes),
+                           lambda stream: save_experience(experience, stream))
 
     def update(self, name: str, **changes) -> PolicyRecord:
         """Change metadata only (e.g. the last score)."""
@@ -106,17 +131,21 @@ class PolicyStore:
         self._write_record(record)
         return record
 
-    def _store(self, record: PolicyRecord, write_model) -> PolicyRecord:
-        """A new model file written by ``write_model(stream)``, then the record naming it."""
+    def _store(self, record: PolicyRecord, write_model, write_experience=None) -> PolicyRecord:
+        """New files written by ``write_model(stream)`` (and ``write_experience``), then the record naming them."""
         folder = self.root / check_name(record.name)
         folder.mkdir(parents=True, exist_ok=True)
-        previous = self.record(record.name).model_file if record.name in self else ""
-        version = int(_MODEL_FILE.match(previous).group(1)) + 1 if previous else 1
+        previous = self.record(record.name) if record.name in self else PolicyRecord(record.name)
+        version = int(_MODEL_FILE.match(previous.model_file).group(1)) + 1 if previous.model_file else 1
         record.model_file, record.updated = f"model-{version}.zip", _now()
+        record.experience_file = f"experience-{version}.npz" if write_experience else ""
         atomic_write(folder / record.model_file, write_model)
+        if write_experience:
+            atomic_write(folder / record.experience_file, write_experience)
         self._write_record(record)
-        if previous:
-            (folder / previous).unlink(missing_ok=True)
+        for old in (previous.model_file, previous.experience_file):
+            if old:
+                (folder / old).unlink(missing_ok=True)
         return record
 
     def _write_record(self, record: PolicyRecord) -> None:

@@ -21,7 +21,8 @@ from typing import Callable
 import gymnasium as gym
 import numpy as np
 
-from learner_node.sac_settings import SAC_KWARGS, TORCH_THREADS
+from learner_node.replay_buffer import Experience, recent_experience
+from learner_node.sac_settings import DEFAULT_NETWORK, TORCH_THREADS, network
 
 Demonstrator = Callable[[gym.Env], np.ndarray]
 
@@ -35,24 +36,46 @@ class PriorConfig:
     stop_success_rate: float = 0.95  # of the last 50 training episodes ...
     min_steps: int = 15_000  # ... once at least this many steps are trained
     seed: int = 0
+    network: str = DEFAULT_NETWORK  # of learner_node.sac_settings.NETWORKS
+
+    def __post_init__(self) -> None:
+        network(self.network)  # ValueError naming the known networks
 
 
 def seed_replay_buffer(model, env: gym.Env, demonstrator: Demonstrator, episodes: int, seed: int) -> int:
     """Add ``episodes`` scripted episodes to ``model``'s replay buffer; returns the transitions added."""
-    added = 0
-    for episode in range(episodes):
-        obs, _ = env.reset(seed=seed + episode)
-        done = False
-        while not done:
-            action = demonstrator(env)
-            next_obs, reward, terminated, truncated, _ = env.step(action)
-            done = terminated or truncated
-            model.replay_buffer.add(
-                obs[None], next_obs[None], action[None], np.array([reward]), np.array([done]),
-                [{"TimeLimit.truncated": truncated and not terminated}],
-            )
-            obs = next_obs
-            added += 1
+    return sum(_add_episode(model.replay_buffer, env, lambda obs: demonstrator(env), seed + episode)
+               for episode in range(episodes))
+
+
+def collect_experience(model, env: gym.Env, transitions: int, seed: int) -> Experience:
+    """``transitions`` env steps of ``model`` acting as SAC acts while it trains (sampling its policy), the
+    last episode cut at the count, a function of ``seed``: experience for a policy stored without any (one
+    made before policies kept experience)."""
+    from stable_baselines3.common.buffers import ReplayBuffer
+
+    model.set_random_seed(seed)  # the policy's samples; the episodes are seeded below
+    buffer = ReplayBuffer(transitions, env.observation_space, env.action_space, device="cpu", n_envs=1)
+    episode = 0
+    while not buffer.full:
+        _add_episode(buffer, env, lambda obs: model.predict(obs, deterministic=False)[0], seed + episode)
+        episode += 1
+    return recent_experience(buffer, transitions)
+
+
+def _add_episode(buffer, env: gym.Env, act: Callable[[np.ndarray], np.ndarray], seed: int) -> int:
+    """One episode from ``env.reset(seed=seed)`` into an SB3 replay buffer of one env, until it ends or the
+    buffer is full; returns the transitions added."""
+    obs, _ = env.reset(seed=seed)
+    added, done = 0, False
+    while not done and not buffer.full:
+        action = act(obs)
+        next_obs, reward, terminated, truncated, _ = env.step(action)
+        done = terminated or truncated
+        buffer.add(obs[None], next_obs[None], action[None], np.array([reward]), np.array([done]),
+                   [{"TimeLimit.truncated": truncated and not terminated}])
+        obs = next_obs
+        added += 1
     return added
 
 
@@ -69,9 +92,13 @@ def train_prior(make_env: Callable[[], gym.Env], demonstrator: Demonstrator, wor
     env = make_env()
     if checkpoint.is_file() and buffer_file.is_file():
         model = SAC.load(checkpoint, env=env, device="cpu")
+        chosen = network(config.network)
+        if (model.batch_size, model.policy_kwargs.get("net_arch")) != (chosen.batch_size, list(chosen.hidden)):
+            raise ValueError(f"{checkpoint} continues a model of another network than {config.network!r}: "
+                             "choose another work directory")
         model.load_replay_buffer(buffer_file)
     else:
-        model = SAC("MlpPolicy", env, seed=config.seed, device="cpu", **SAC_KWARGS)
+        model = SAC("MlpPolicy", env, seed=config.seed, device="cpu", **network(config.network).sac_kwargs())
         seed_replay_buffer(model, make_env(), demonstrator, config.demo_episodes, config.seed + 10_000)
         # Demonstrations fill the buffer, so updates (and policy actions) start at once.
         model.learning_starts = 0

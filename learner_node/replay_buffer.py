@@ -1,8 +1,14 @@
-"""Compact checkpoints of an SB3 replay buffer: only the filled rows.
+"""Compact checkpoints of an SB3 replay buffer (only the filled rows), and experience.
 
 SB3's ``save_replay_buffer`` pickles the whole preallocated buffer (about
 110 MB at 200k transitions of this env) however little of it is used; a
 checkpoint every few thousand steps needs only what was collected.
+
+*Experience* is a bounded set of transitions kept beside a stored policy
+(``PolicyStore``), flat (one row per transition, whatever the number of envs
+that collected them) so that a goal on any number of envs can start its
+buffer with them. Both file kinds are plain ``.npz`` arrays, loaded without
+unpickling.
 """
 
 from __future__ import annotations
@@ -13,6 +19,9 @@ from typing import BinaryIO
 import numpy as np
 
 _ARRAYS = ("observations", "next_observations", "actions", "rewards", "dones", "timeouts")
+
+#: Transitions, one row each: the arrays of ``_ARRAYS`` with the env axis folded into the first.
+Experience = dict[str, np.ndarray]
 
 
 def save_replay_buffer(buffer, stream: BinaryIO) -> None:
@@ -31,3 +40,52 @@ def load_replay_buffer(buffer, path: Path) -> bool:
             getattr(buffer, name)[:filled] = saved[name]
         buffer.pos, buffer.full = int(saved["pos"]), bool(saved["full"])
     return True
+
+
+def recent_experience(buffer, count: int) -> Experience:
+    """The last ``count`` transitions (fewer when fewer are in) of an SB3 replay buffer, oldest first."""
+    rows = buffer.buffer_size if buffer.full else buffer.pos
+    order = np.roll(np.arange(rows), -buffer.pos) if buffer.full else np.arange(rows)  # oldest row first
+    keep = order[max(0, rows - -(-count // buffer.n_envs)):]
+    return {name: _flat(getattr(buffer, name)[keep])[-count:] for name in _ARRAYS}
+
+
+def add_experience(buffer, experience: Experience) -> int:
+    """Append ``experience`` to an SB3 replay buffer in rows of its ``n_envs``; returns the transitions added.
+
+    Whole rows only: up to ``n_envs - 1`` of the oldest transitions are left out. ``ValueError`` when the
+    transitions are of another observation or action shape than the buffer's.
+    """
+    observations = experience["observations"]
+    if (observations.shape[1:] != buffer.observations.shape[2:]
+            or experience["actions"].shape[1:] != buffer.actions.shape[2:]):
+        raise ValueError(f"experience of observations {observations.shape[1:]} and actions "
+                         f"{experience['actions'].shape[1:]} does not fit a buffer of "
+                         f"{buffer.observations.shape[2:]} and {buffer.actions.shape[2:]}")
+    rows = min(len(observations) // buffer.n_envs, buffer.buffer_size - buffer.pos)
+    used = rows * buffer.n_envs
+    for name in _ARRAYS:
+        values = experience[name][len(observations) - used:]
+        target = getattr(buffer, name)
+        target[buffer.pos:buffer.pos + rows] = values.reshape((rows, buffer.n_envs) + target.shape[2:])
+    buffer.pos += rows
+    buffer.full = buffer.full or buffer.pos == buffer.buffer_size
+    buffer.pos %= buffer.buffer_size
+    return used
+
+
+def save_experience(experience: Experience, stream: BinaryIO) -> None:
+    np.savez_compressed(stream, **{name: experience[name] for name in _ARRAYS})
+
+
+def load_experience(path: Path) -> Experience:
+    with np.load(path) as saved:
+        experience = {name: saved[name] for name in _ARRAYS}
+    if len({len(values) for values in experience.values()}) != 1:
+        raise ValueError(f"{path}: the arrays of the experience differ in length")
+    return experience
+
+
+def _flat(values: np.ndarray) -> np.ndarray:
+    """(rows, n_envs, ...) -> (rows * n_envs, ...), transitions of one row next to each other."""
+    return values.reshape((-1,) + values.shape[2:])

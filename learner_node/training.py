@@ -25,9 +25,10 @@ order of one step); around it:
 
 Choices:
 - A goal starts from the stored model with an empty replay buffer (what
-  loading an SB3 model gives), and updates start once a batch of
-  transitions is in it; what it acts with until then, its batch and its
-  learning rate are the trainer's ``FineTuning`` (``learner_node.sac_settings``).
+  loading an SB3 model gives) or, when the trainer's ``FineTuning`` says so,
+  with the experience its initial policy keeps; updates start once a batch
+  of transitions is in it; what it acts with until then, its batch and its
+  learning rate are the ``FineTuning`` too (``learner_node.sac_settings``).
   ``keep_replay_buffer`` continues the previous goal's model and buffer
   instead, when the goal starts from that goal's output: the baselines
   train one policy through many short goals.
@@ -65,7 +66,7 @@ from glocal_ros.tasks import validate_tasks
 from learner_node.evaluation import Score, evaluate
 from learner_node.policies import RANDOM_POLICY, PolicyRegistry
 from learner_node.policy_store import PolicyRecord, check_name
-from learner_node.replay_buffer import load_replay_buffer, save_replay_buffer
+from learner_node.replay_buffer import add_experience, load_replay_buffer, recent_experience, save_replay_buffer
 from learner_node.sac_settings import DEFAULT_FINE_TUNING, SAC_KWARGS, TORCH_THREADS, FineTuning
 from learner_node.updates import OverlappedUpdates
 from learner_node.vec_env import BatchVecEnv, TaskCycle
@@ -239,7 +240,7 @@ class Trainer:
         if saved is not None and saved["spec"] == _spec_key(spec):
             model = SAC.load(checkpoint_dir / saved["model"], env=vec_env, device="cpu")
             if not load_replay_buffer(model.replay_buffer, checkpoint_dir / saved["buffer"]):
-                self._start_with_empty_buffer(model)
+                self._start_buffer(model, spec)
             state.__dict__.update(saved["state"])
             restore_random_state(model, saved["random_state"])
             cycle.position = saved["task_position"]
@@ -250,17 +251,25 @@ class Trainer:
             model.set_env(vec_env, force_reset=True)
             return model, 0
         model = SAC.load(store_path, env=vec_env, device="cpu")
-        self._start_with_empty_buffer(model)
+        self._start_buffer(model, spec)
         return model, 0
 
-    def _start_with_empty_buffer(self, model) -> None:
-        """Act as ``fine_tuning.first_actions`` says until a batch is in (``OverlappedUpdates`` waits for it)."""
-        first_batch = self.fine_tuning.batch_size if self.fine_tuning.first_actions == "random" else 0
-        model.learning_starts = model.num_timesteps + first_batch
+    def _start_buffer(self, model, spec: TrainSpec) -> None:
+        """Fill the new model's empty buffer with the initial policy's experience (``fine_tuning.experience``),
+        and act as ``fine_tuning.first_actions`` says until a batch of the goal's own is in
+        (``OverlappedUpdates`` waits for a batch in the buffer)."""
+        if self.fine_tuning.experience:
+            experience = self.policies.experience(spec.initial_policy)
+            if experience is not None:
+                add_experience(model.replay_buffer,
+                               {name: values[-self.fine_tuning.experience:] for name, values in experience.items()})
+        first_batch = self.fine_tuning.batch_size or model.batch_size
+        model.learning_starts = model.num_timesteps + (first_batch if self.fine_tuning.first_actions == "random" else 0)
 
     def _tune(self, model) -> None:
         """The goal's schedule on whichever model it trains (stored, checkpointed or warm)."""
-        model.batch_size = self.fine_tuning.batch_size
+        if self.fine_tuning.batch_size is not None:
+            model.batch_size = self.fine_tuning.batch_size
         model.gradient_steps = SAC_KWARGS["gradient_steps"]
         if self.fine_tuning.learning_rate is not None:
             model.learning_rate = self.fine_tuning.learning_rate
@@ -328,7 +337,9 @@ class Trainer:
             last_score_task=spec.task if state.score else "",
             extra={"learned": state.learned, "threshold": spec.threshold, "eval_episodes": spec.eval_episodes},
         )
-        stored = self.policies.store.save(model, record)
+        experience = self.fine_tuning.experience
+        stored = self.policies.store.save(
+            model, record, recent_experience(model.replay_buffer, experience) if experience else None)
         self._warm = (spec.output_policy, str(self.policies.store.root / stored.name / stored.model_file), model)
         return stored
 

@@ -8,6 +8,8 @@ from glocal_app.benches.learner import LearnerBenchRow, learner_bench_report, ru
 from glocal_app.benches.transfer import (TransferGoal, TransferSettings, run_transfer_bench, run_transfer_graph,
                                         transfer_bench_report)
 from glocal_app.cli import build_parser, cmd_bench_learner, cmd_bench_transfer
+from glocal_ros.paths import assets_dir
+from learner_node.policy_store import PolicyStore
 
 
 def test_bench_learner_reports_one_row_per_env_count():
@@ -48,30 +50,37 @@ def test_bench_learner_command_line():
     assert (args.envs, args.steps, args.rounds, args.no_learner_node, args.out) == ("1,2", 100, 2, True, Path("x.md"))
 
 
-def test_bench_transfer_runs_every_recipe_on_the_same_episodes_and_tabulates_them():
-    """Real goals in spawned workers, tiny: 2 recipes x 1 task x 1 seed, budget 8, an evaluation every 4 steps."""
+def test_bench_transfer_runs_every_arm_on_the_same_episodes_and_tabulates_them(tmp_path):
+    """Real goals in spawned workers, tiny: 2 recipes x 2 priors (the shipped one, and a copy of it in a store
+    of priors) x 1 task x 1 seed, budget 8, an evaluation every 4 steps."""
+    prior_store = tmp_path / "priors"
+    PolicyStore(prior_store).add_copy(PolicyStore(assets_dir() / "priors"), "prior", "prior-copy")
     settings = TransferSettings(step_budget=8, eval_interval=4, eval_episodes=2, num_envs=2)
     log: list[str] = []
-    goals = run_transfer_bench(["random-first", "policy-first"], ["A0"], [5], settings, jobs=2, log=log.append)
+    goals = run_transfer_bench(["random-first", "policy-first"], ["A0"], [5], settings, jobs=2, log=log.append,
+                               priors=["prior", "prior-copy"], prior_store=prior_store)
 
-    assert [(g.recipe, g.task, g.seed) for g in goals] == [("random-first", "A0", 5), ("policy-first", "A0", 5)]
+    assert [(g.recipe, g.prior, g.task, g.seed) for g in goals] == [
+        ("random-first", "prior", "A0", 5), ("policy-first", "prior", "A0", 5),
+        ("random-first", "prior-copy", "A0", 5), ("policy-first", "prior-copy", "A0", 5)]
     for goal in goals:
         assert [steps for steps, _ in goal.curve] == [0, 4, 8]
         assert all(0 <= score <= 2 for _, score in goal.curve) and goal.wall_s > 0
-    assert goals[0].start == goals[1].start, "both recipes start from the prior on the same episodes"
-    assert len(log) == 2
+    assert len({goal.start for goal in goals}) == 1, "every arm starts from the same weights on the same episodes"
+    assert len(log) == 4
 
     report = transfer_bench_report(goals, "glocal-ros bench transfer --tasks A0", settings, jobs=2)
     assert report.startswith("# bench transfer")
     assert "Command: `glocal-ros bench transfer --tasks A0`" in report
     rows = [line for line in report.splitlines() if line.startswith(("| random-first |", "| policy-first |"))]
-    assert len(rows) == 4  # one summary row and one goal row per recipe
-    assert all(line.count("|") == 9 for line in rows[:2])  # eight summary columns
-    assert all(line.count("|") == 10 for line in rows[2:])  # recipe, task, seed, 3 scores, steps to B, drop, s
+    assert len(rows) == 8  # one summary row and one goal row per arm
+    assert all(line.count("|") == 10 for line in rows[:4])  # nine summary columns
+    assert all(line.count("|") == 11 for line in rows[4:])  # recipe, prior, task, seed, 3 scores, to B, drop, s
 
     # The same goals through a sim_node and a learner_node: the same episodes, so the same start.
-    (through_graph,) = run_transfer_graph(["policy-first"], ["A0"], [5], settings, log=log.append)
-    assert (through_graph.recipe, through_graph.task, through_graph.seed) == ("policy-first", "A0", 5)
+    (through_graph,) = run_transfer_graph(["policy-first"], ["A0"], [5], settings, log=log.append,
+                                          priors=["prior-copy"], prior_store=prior_store)
+    assert (through_graph.arm, through_graph.task, through_graph.seed) == (("policy-first", "prior-copy"), "A0", 5)
     assert [steps for steps, _ in through_graph.curve] == [0, 4, 8]
     assert through_graph.start == goals[1].start
     assert "through the graph" in transfer_bench_report([through_graph], "x", settings, jobs=1, graph=True)
@@ -92,6 +101,11 @@ def test_a_transfer_curve_gives_steps_to_b_and_collapse():
 
 @pytest.mark.parametrize("change, message", [
     (dict(recipes=["rlpd"]), "unknown fine-tuning recipe"),
+    (dict(priors=["no-such-prior"]), "no prior 'no-such-prior'"),
+    (dict(priors=["../prior"]), "invalid policy name"),
+    (dict(priors=[]), "a prior"),
+    (dict(priors=["prior", "prior"]), "must not repeat"),
+    (dict(prior_store=Path("/no/such/store")), "is not a directory"),
     (dict(tasks=["Z9"]), "Z9"),
     (dict(settings=TransferSettings(step_budget=1000, eval_interval=300)), "multiple of the envs"),
     (dict(settings=TransferSettings(eval_episodes=0)), "at least 1"),
@@ -114,3 +128,6 @@ def test_bench_transfer_command_line():
     assert args.func is cmd_bench_transfer
     assert (args.recipes, args.tasks, args.seeds, args.budget, args.eval_interval, args.eval_episodes, args.envs,
             args.out) == ("policy-first", "A0,B1", "0,1", 1000, 250, 20, 4, Path("bench/results/transfer.md"))
+    assert (args.priors, args.prior_store) == ("prior", None)
+    args = build_parser().parse_args(["bench", "transfer", "--priors", "prior,prior-64x64", "--prior-store", "p"])
+    assert (args.priors, args.prior_store) == ("prior,prior-64x64", Path("p"))

@@ -38,3 +38,23 @@ def test_evaluate_reports_bad_input_without_a_traceback():
     result = run_cli("evaluate", "--policy", "random", "--tasks", "A0,Z1")
     assert result.returncode == 2
     assert "unknown task 'Z1'" in result.stderr and "Traceback" not in result.stderr
+
+
+def test_collect_experience_gives_a_stored_policy_transitions_of_it_acting_on_its_task(tmp_path):
+    from learner_node.policy_store import PolicyStore
+
+    result = run_cli("collect-experience", "prior", "--out", str(tmp_path), "--transitions", "60", "--seed", "4")
+    assert result.returncode == 0, result.stderr
+    assert "prior: 60 transitions on A0" in result.stdout
+    store, shipped = PolicyStore(tmp_path), PolicyStore(REPO / "assets" / "priors")
+    assert len(store.experience("prior")["observations"]) == 60
+    assert (tmp_path / "prior" / store.record("prior").model_file).read_bytes() == shipped.model_path(
+        "prior").read_bytes(), "the model is the shipped one, unchanged"
+
+
+def test_collect_experience_refuses_bad_input_without_a_traceback(tmp_path):
+    for args, message in ((("nope", "--store", str(tmp_path)), "no policy 'nope'"),
+                          (("prior", "--out", str(tmp_path), "--transitions", "0"), "at least 1")):
+        result = run_cli("collect-experience", *args)
+        assert result.returncode == 2 and message in result.stderr and "Traceback" not in result.stderr
+    assert not (tmp_path / "prior").exists()

@@ -15,11 +15,11 @@ def policy_dir(tmp_path):
     from stable_baselines3 import SAC
 
     from learner_node.policy_store import PolicyRecord, PolicyStore
-    from learner_node.sac_settings import SAC_KWARGS
+    from learner_node.sac_settings import DEFAULT_NETWORK, network
     from sim_node.grasp_env import GraspEnv
 
     env = GraspEnv("A0")
-    model = SAC("MlpPolicy", env, seed=0, device="cpu", **{**SAC_KWARGS, "buffer_size": 100})
+    model = SAC("MlpPolicy", env, seed=0, device="cpu", **dict(network(DEFAULT_NETWORK).sac_kwargs(), buffer_size=100))
     PolicyStore(tmp_path / "policies").save(model, PolicyRecord(name="untrained", task="A0"))
     env.close()
     return tmp_path / "policies"

@@ -9,14 +9,14 @@ import pytest
 from stable_baselines3 import SAC
 
 from learner_node.policy_store import PolicyRecord, PolicyStore, UnknownPolicyError
-from learner_node.sac_settings import SAC_KWARGS
+from learner_node.sac_settings import DEFAULT_NETWORK, network
 from sim_node.grasp_env import GraspEnv
 
 
 @pytest.fixture(scope="module")
 def model():
     env = GraspEnv("A0")
-    yield SAC("MlpPolicy", env, seed=0, device="cpu", **{**SAC_KWARGS, "buffer_size": 100})
+    yield SAC("MlpPolicy", env, seed=0, device="cpu", **dict(network(DEFAULT_NETWORK).sac_kwargs(), buffer_size=100))
     env.close()
 
 
@@ -106,3 +106,70 @@ def test_a_write_that_fails_for_room_names_the_file_and_leaves_nothing(tmp_path)
                             timeout=120, check=True)
     assert f"cannot write {target}: File too large" in result.stdout, result.stdout + result.stderr
     assert list(target.parent.iterdir()) == []  # no temporary file left
+
+
+def _experience(transitions: int, start: float = 0.0) -> dict:
+    """Transitions numbered by their observation's first entry, oldest first."""
+    observations = np.zeros((transitions, 63), dtype=np.float32)
+    observations[:, 0] = start + np.arange(transitions)
+    return {"observations": observations, "next_observations": observations + 1,
+            "actions": np.zeros((transitions, 5), dtype=np.float32),
+            "rewards": -np.ones(transitions, dtype=np.float32), "dones": np.zeros(transitions, dtype=np.float32),
+            "timeouts": np.zeros(transitions, dtype=np.float32)}
+
+
+def test_experience_is_kept_with_its_model_copied_with_it_and_dropped_by_a_save_without_it(tmp_path, model):
+    store = PolicyStore(tmp_path / "a")
+    store.save(model, PolicyRecord(name="P"), _experience(7))
+    assert sorted(p.name for p in (tmp_path / "a" / "P").iterdir()) == ["experience-1.npz", "model-1.zip",
+                                                                        "policy.json"]
+    np.testing.assert_array_equal(store.experience("P")["observations"][:, 0], np.arange(7))
+
+    copy = PolicyStore(tmp_path / "b")
+    copy.add_copy(store, "P", "Q")
+    np.testing.assert_array_equal(copy.experience("Q")["next_observations"][:, 0], np.arange(7) + 1)
+
+    model_bytes = (tmp_path / "a" / "P" / "model-1.zip").read_bytes()
+    store.keep_experience("P", _experience(3, start=100))
+    assert (tmp_path / "a" / "P" / store.record("P").model_file).read_bytes() == model_bytes
+    np.testing.assert_array_equal(store.experience("P")["observations"][:, 0], [100, 101, 102])
+
+    store.save(model, PolicyRecord(name="P"))
+    assert store.experience("P") is None
+    assert sorted(p.name for p in (tmp_path / "a" / "P").iterdir()) == ["model-3.zip", "policy.json"]
+
+
+@pytest.mark.parametrize("experience_file", ["../other/experience-1.npz", "/etc/passwd", "evil.pkl"])
+def test_an_experience_file_outside_the_store_naming_is_refused(tmp_path, model, experience_file):
+    store = PolicyStore(tmp_path)
+    store.save(model, PolicyRecord(name="G1"), _experience(2))
+    metadata = tmp_path / "G1" / "policy.json"
+    metadata.write_text(metadata.read_text().replace('"experience-1.npz"', json.dumps(experience_file)))
+    with pytest.raises(ValueError, match="is not an experience file of this store"):
+        store.experience("G1")
+
+
+def test_recent_experience_and_add_experience_fold_the_env_axis(model):
+    """A buffer of 2 envs that wrapped gives its newest transitions, oldest first; a buffer of 3 envs takes
+    them in whole rows of 3, the oldest left over dropped."""
+    from stable_baselines3.common.buffers import ReplayBuffer
+
+    from learner_node.replay_buffer import add_experience, recent_experience
+
+    spaces = (model.observation_space, model.action_space)
+    two = ReplayBuffer(8, *spaces, device="cpu", n_envs=2)  # SB3: 8 transitions, 4 rows of 2
+    for row in range(6):  # rows 0..5 into 4 slots: rows 2..5 stay
+        obs = np.zeros((2, 63), dtype=np.float32)
+        obs[:, 0] = [2 * row, 2 * row + 1]
+        two.add(obs, obs + 1, np.zeros((2, 5), dtype=np.float32), -np.ones(2), np.zeros(2), [{}, {}])
+    recent = recent_experience(two, 5)
+    np.testing.assert_array_equal(recent["observations"][:, 0], [7, 8, 9, 10, 11])
+    assert len(recent_experience(two, 100)["observations"]) == 8
+
+    three = ReplayBuffer(30, *spaces, device="cpu", n_envs=3)
+    assert add_experience(three, recent) == 3  # one whole row of 3; 7 and 8 left out
+    assert three.pos == 1
+    np.testing.assert_array_equal(three.observations[0, :, 0], [9, 10, 11])
+    np.testing.assert_array_equal(three.next_observations[0, :, 0], [10, 11, 12])
+    with pytest.raises(ValueError, match="does not fit"):
+        add_experience(three, {**recent, "observations": np.zeros((5, 10), dtype=np.float32)})

@@ -290,9 +290,12 @@ GRASPING_SIM = dict(max_steps=50)
 
 @pytest.mark.parametrize("graph", [GRASPING_SIM], indirect=True)
 def test_evaluations_inside_a_goal_score_as_learner_evaluate_does(graph, ros_node):
-    """Before any gradient step (updates start after a batch of 256 transitions) an evaluation inside
-    the goal scores the prior itself; it must score as a standalone learner/evaluate of the prior, on
-    the feedback, on glocal/evaluations and in the sim's eval EpisodeRecords."""
+    """Before any gradient step (with SB3's start, random-first, updates start after a batch of 256
+    transitions) an evaluation inside the goal scores the prior itself; it must score as a standalone
+    learner/evaluate of the prior, on the feedback, on glocal/evaluations and in the sim's eval
+    EpisodeRecords."""
+    graph["learner"].stop()
+    learner = graph["start_learner"](fine_tuning="random-first")
     evaluations = evaluations_of(ros_node, "trained")
     eval_records = []
     ros_node.create_subscription(
@@ -300,7 +303,7 @@ def test_evaluations_inside_a_goal_score_as_learner_evaluate_does(graph, ros_nod
         lambda record: eval_records.append(record) if record.phase == PHASE_EVAL and record.policy_name == "trained"
         else None, qos.EPISODES)
     goal = Goal(graph["train"], train_goal(step_budget=200, eval_interval=100, eval_episodes=20, threshold=19.5))
-    status, result = goal.result(300, processes=[graph["learner"]])
+    status, result = goal.result(300, processes=[learner])
     assert status == GoalStatus.STATUS_SUCCEEDED, result.message
     standalone = call(graph["evaluate"], Evaluate.Request(policy="prior", tasks=["A0"], episodes=20), 300)
     assert standalone.success and standalone.scores[0].successes >= 15, "the prior should grasp A0 at T = 50"
@@ -323,14 +326,17 @@ def test_a_goal_that_stops_when_learned_stops_at_the_evaluation_that_passed(grap
 
     The prior grasps C3 about 8 times in 10, so the first pass comes by chance; the sim's random
     streams, seeded by a one-episode request, make it the same chance every run: with seed 2 the check
-    before training scores 8 and the evaluation at 50 steps 10. Should the assets change that, pick
-    another seed for which the first pass comes at an interval."""
+    before training scores 8 and the evaluation at 50 steps 10 (SB3's start, random-first: no gradient
+    step in the first 256, so both score the prior). Should the assets change that, pick another seed
+    for which the first pass comes at an interval."""
+    graph["learner"].stop()
+    learner = graph["start_learner"](fine_tuning="random-first")
     threshold = 8.5
     evaluations = evaluations_of(ros_node, "trained")
     call(graph["evaluate"], Evaluate.Request(policy="random", tasks=["C3"], episodes=1, seed=2), 60)
     goal = Goal(graph["train"], train_goal(task="C3", step_budget=250, eval_interval=50, eval_episodes=10,
                                            threshold=threshold, stop_when_learned=True))
-    status, result = goal.result(300, processes=[graph["learner"]])
+    status, result = goal.result(300, processes=[learner])
     assert status == GoalStatus.STATUS_SUCCEEDED, result.message
     wait_until(lambda: evaluations and evaluations[-1].scores[0].successes == result.score.successes, 30,
                "the goal's evaluations on glocal/evaluations")

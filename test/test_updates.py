@@ -1,6 +1,7 @@
 """The learner's gradient steps run while the sim steps: SB3's updates, a step later, none lost; and the
 fine-tuning recipe decides how a goal starts."""
 
+import numpy as np
 import pytest
 
 from glocal_ros.paths import assets_dir
@@ -39,9 +40,10 @@ class SplitSteps:
 def test_each_steps_updates_run_during_the_next_step_and_the_last_at_the_end(tmp_path, monkeypatch):
     from stable_baselines3 import SAC
 
-    num_envs, batch_size = 2, SAC_KWARGS["batch_size"]
+    num_envs = 2
     envs = SplitSteps(BatchedEnvs(lambda i: GraspEnv("A0"), num_envs, "A0"))
     policies = PolicyRegistry(PolicyStore(tmp_path / "store"), [PolicyStore(assets_dir() / "priors")])
+    batch_size = policies.model("prior").batch_size
     train_calls: list[tuple[bool, int]] = []  # (a step was out, gradient steps)
     real_train = SAC.train
 
@@ -53,7 +55,8 @@ def test_each_steps_updates_run_during_the_next_step_and_the_last_at_the_end(tmp
     vector_steps_with_updates = 20
     step_budget = batch_size + num_envs * vector_steps_with_updates
     try:
-        outcome = Trainer(envs, policies, tmp_path / "checkpoints").train(TrainSpec(
+        # SB3's own start (random-first): updates from batch_size steps on, as the plain loop does.
+        outcome = Trainer(envs, policies, tmp_path / "checkpoints", fine_tuning=FineTuning()).train(TrainSpec(
             "A0", "prior", "a0", step_budget=step_budget, threshold=0, eval_episodes=1))
     finally:
         envs.envs.close()
@@ -67,17 +70,20 @@ def test_each_steps_updates_run_during_the_next_step_and_the_last_at_the_end(tmp
     assert stored._n_updates - policies.model("prior")._n_updates == num_envs * vector_steps_with_updates
 
 
-@pytest.mark.parametrize("recipe", ["random-first", "policy-first", "policy-first-lr1e-4"])
+@pytest.mark.parametrize("recipe", ["random-first", "policy-first", "policy-first-lr1e-4",
+                                    FineTuning(first_actions="random", batch_size=32)])
 def test_a_recipe_chooses_the_first_actions_and_the_rate_and_updates_wait_for_a_batch(tmp_path, monkeypatch, recipe):
-    """SB3's warm-up draws ``batch_size`` random actions; "policy" acts with the loaded policy at once. Either way
-    the first gradient step comes once the buffer holds a batch, so both update equally often."""
+    """SB3's warm-up draws a batch of random actions; "policy" acts with the loaded policy at once. Either way
+    the first gradient step comes once the buffer holds a batch, so both update equally often. A recipe's batch
+    (None: the stored model's own) is the batch of every update."""
     from gymnasium.spaces import Box
     from stable_baselines3 import SAC
 
-    tuning = fine_tuning_recipe(recipe)
+    tuning = recipe if isinstance(recipe, FineTuning) else fine_tuning_recipe(recipe)
     num_envs = 2
     envs = BatchedEnvs(lambda i: GraspEnv("A0"), num_envs, "A0")
     policies = PolicyRegistry(PolicyStore(tmp_path / "store"), [PolicyStore(assets_dir() / "priors")])
+    batch = tuning.batch_size or policies.model("prior").batch_size
     random_actions, updates = [0], [0]
     real_sample, real_train = Box.sample, SAC.train
 
@@ -86,13 +92,14 @@ def test_a_recipe_chooses_the_first_actions_and_the_rate_and_updates_wait_for_a_
         return real_sample(space, *args, **kwargs)
 
     def counted_train(model, gradient_steps, batch_size=64):
+        assert batch_size == batch
         assert model.replay_buffer.pos * num_envs >= batch_size, "an update before a batch was in"
         updates[0] += gradient_steps
         return real_train(model, gradient_steps, batch_size)
 
     monkeypatch.setattr(Box, "sample", counted_sample)
     monkeypatch.setattr(SAC, "train", counted_train)
-    step_budget = tuning.batch_size + num_envs * 20
+    step_budget = batch + num_envs * 20
     try:
         outcome = Trainer(envs, policies, tmp_path / "checkpoints", fine_tuning=tuning).train(TrainSpec(
             "A0", "prior", "a0", step_budget=step_budget, threshold=0, eval_episodes=1))
@@ -100,9 +107,10 @@ def test_a_recipe_chooses_the_first_actions_and_the_rate_and_updates_wait_for_a_
         envs.close()
 
     assert outcome.completed and outcome.steps_used == step_budget
-    assert random_actions[0] == (tuning.batch_size if tuning.first_actions == "random" else 0)
+    assert random_actions[0] == (batch if tuning.first_actions == "random" else 0)
     assert updates[0] == num_envs * 20
     stored, prior = policies.model("a0"), policies.model("prior")
+    assert stored.batch_size == batch
     rate = tuning.learning_rate or prior.learning_rate
     assert stored.learning_rate == rate
     assert stored.actor.optimizer.param_groups[0]["lr"] == pytest.approx(rate)
@@ -115,3 +123,48 @@ def test_an_unknown_recipe_or_setting_is_refused_with_the_choices():
         FineTuning(first_actions="demonstrations")
     with pytest.raises(ValueError, match="batch_size"):
         FineTuning(batch_size=0)
+
+
+def test_parent_experience_starts_the_buffer_and_the_stored_policy_keeps_the_newest(tmp_path, monkeypatch):
+    """The "parent-experience" way: the goal's buffer starts with its initial policy's kept transitions, so
+    updates start at the first step; the policy it stores keeps the newest transitions, its own last."""
+    from stable_baselines3 import SAC
+
+    from learner_node.prior import collect_experience
+
+    parents = PolicyStore(tmp_path / "parents")
+    parents.add_copy(PolicyStore(assets_dir() / "priors"), "prior", "prior")
+    env = GraspEnv("A0")
+    try:
+        parent_experience = collect_experience(parents.load("prior"), env, 300, seed=3)
+    finally:
+        env.close()
+    parents.keep_experience("prior", parent_experience)
+    num_envs, step_budget = 2, 20
+    envs = BatchedEnvs(lambda i: GraspEnv("B1"), num_envs, "B1")
+    policies = PolicyRegistry(PolicyStore(tmp_path / "store"), [parents])
+    rows_at_first_update, updates = [], [0]
+    real_train = SAC.train
+
+    def counted_train(model, gradient_steps, batch_size=64):
+        if not rows_at_first_update:
+            rows_at_first_update.append(model.replay_buffer.pos)
+        updates[0] += gradient_steps
+        return real_train(model, gradient_steps, batch_size)
+
+    monkeypatch.setattr(SAC, "train", counted_train)
+    tuning = FineTuning(first_actions="policy", experience=300)
+    try:
+        outcome = Trainer(envs, policies, tmp_path / "checkpoints", fine_tuning=tuning).train(TrainSpec(
+            "B1", "prior", "b1", step_budget=step_budget, threshold=0, eval_episodes=1))
+    finally:
+        envs.close()
+
+    assert outcome.completed and outcome.steps_used == step_budget
+    assert updates[0] == step_budget, "the parent's 300 transitions are a batch: updates from the first step"
+    assert rows_at_first_update == [300 // num_envs + 1]  # the parent's rows, then the goal's first step
+    kept = policies.experience("b1")
+    assert len(kept["observations"]) == 300
+    np.testing.assert_array_equal(kept["observations"][:300 - step_budget],
+                                  parent_experience["observations"][step_budget:])
+    assert not np.array_equal(kept["observations"][-1], parent_experience["observations"][-1])

@@ -52,13 +52,14 @@ from glocal_ros.sim_contract import BatchStepper
 from node_common.runner import spinning_node
 from learner_node.policies import PolicyRegistry
 from learner_node.policy_store import PolicyStore
-from learner_node.sac_settings import SAC_KWARGS, TORCH_THREADS
+from learner_node.sac_settings import DEFAULT_NETWORK, NETWORKS, SAC_KWARGS, TORCH_THREADS
 from learner_node.training import Trainer, TrainSpec
 
 #: Env steps of a goal after the update-free warm-up before the clock starts.
 SETTLE_STEPS = 64
 TASK = "A0"
 INITIAL_POLICY = "prior"
+BATCH_SIZE = NETWORKS[DEFAULT_NETWORK].batch_size  # the shipped prior's (train-prior's default network)
 
 
 @dataclass(frozen=True)
@@ -81,7 +82,7 @@ class LearnerBenchRow:
 
 def warmup_steps(num_envs: int) -> int:
     """Goal steps before the clock starts: updates run from ``batch_size`` steps on."""
-    return SAC_KWARGS["batch_size"] + SETTLE_STEPS + num_envs
+    return BATCH_SIZE + SETTLE_STEPS + num_envs
 
 
 def train_steps_per_second(envs: BatchStepper, policies: PolicyRegistry, work_dir: Path, output_policy: str,
@@ -222,8 +223,7 @@ def run_learner_bench(env_counts: Sequence[int], steps: int, rounds: int, learne
 
 
 def learner_bench_report(rows: Sequence[LearnerBenchRow], command: str, steps: int, rounds: int) -> str:
-    batch_size = SAC_KWARGS["batch_size"]
-
+    batch_size = BATCH_SIZE
     gradient_steps = SAC_KWARGS["gradient_steps"]
     gradient_steps = ("N gradient steps" if gradient_steps == -1 else
                       f"{gradient_steps} gradient step{'s' if gradient_steps != 1 else ''}")

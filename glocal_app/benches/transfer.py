@@ -1,7 +1,7 @@
 """``glocal-ros bench transfer``: how Train goals fine-tune the A0 prior on other objects.
 
 For each fine-tuning recipe (``learner_node.sac_settings.FINE_TUNING_RECIPES``),
-task and seed, one seeded Train goal from the shipped ``prior`` with the same
+prior, task and seed, one seeded Train goal from the prior with the same
 step budget, scored every ``eval_interval`` training steps on
 ``eval_episodes`` deterministic episodes (the paper's score), and never
 stopped when learned, so that the whole curve is seen. Per goal it records:
@@ -15,17 +15,21 @@ stopped when learned, so that the whole curve is seen. Per goal it records:
   is a collapse (the score was there before training and training lost it);
 - wall-clock of the goal (its evaluations included).
 
-Goals with the same task and seed run the same episodes under every recipe
-(the goal's seed derives every stream, ``learner_node.training``), so the
-recipes are compared pairwise on equal footing. The goals run in-process
+The priors are stored policies: the shipped ``prior`` by default, and for
+comparing networks (``learner_node.sac_settings.NETWORKS``) others that
+``glocal-ros train-prior --network ... --name ... --out DIR`` made, read from
+``prior_store`` DIR before the shipped store. Each (recipe, prior) pair is
+an arm. Goals with the same task and seed run the same episodes in every
+arm (the goal's seed derives every stream, ``learner_node.training``), so
+the arms are compared pairwise on equal footing. The goals run in-process
 (the ``Trainer`` on a ``BatchedEnvs``, no ROS), ``jobs`` at a time in worker
-processes, interleaved by recipe so that load on the shared machine hits all
-recipes alike.
+processes, interleaved by arm so that load on the shared machine hits all
+arms alike.
 
-``--graph`` runs the same goals through the graph: per recipe a sim_node and
-a learner_node process (its ``fine_tuning`` parameter set to the recipe), in
-a namespace of their own, sent the goals by the curriculum's ``RosLearner``;
-the recipes' pairs run at once. The start is the prior scored by
+``--graph`` runs the same goals through the graph: per arm a sim_node and
+a learner_node process (its ``fine_tuning`` parameter set to the recipe, the
+prior copied into its store), in a namespace of their own, sent the goals by
+the curriculum's ``RosLearner``; the arms' pairs run at once. The start is the prior scored by
 ``learner/evaluate`` on the same episodes, the curve the goal's evaluations
 on ``glocal/evaluations`` (the k-th one at k intervals: the settings make
 every evaluation fall exactly on its step).
@@ -47,6 +51,7 @@ from pathlib import Path
 from typing import Callable, Sequence
 
 from glocal_ros.curriculum.learner import passes_threshold
+from glocal_ros.paths import assets_dir
 from glocal_ros.seeds import MAX_SEED
 from glocal_ros.tasks import validate_tasks
 
@@ -93,6 +98,11 @@ class TransferGoal:
     eval_episodes: int
     threshold: float
     wall_s: float
+    prior: str = INITIAL_POLICY
+
+    @property
+    def arm(self) -> tuple[str, str]:
+        return self.recipe, self.prior
 
     @property
     def start(self) -> int:
@@ -117,9 +127,16 @@ class TransferGoal:
         return self.drop_points >= COLLAPSE_POINTS
 
 
-def run_goal(recipe: str, task: str, seed: int, settings: TransferSettings) -> TransferGoal:
-    """One seeded goal from the prior in this process, on envs of its own; its curve and wall-clock."""
-    from glocal_ros.paths import assets_dir
+def prior_stores(prior_store: Path | None) -> list:
+    """The read-only stores the priors come from: ``prior_store`` (when given), then the shipped one."""
+    from learner_node.policy_store import PolicyStore
+
+    return [PolicyStore(root) for root in ([prior_store] if prior_store else []) + [assets_dir() / "priors"]]
+
+
+def run_goal(recipe: str, prior: str, task: str, seed: int, settings: TransferSettings,
+             prior_store: Path | None = None) -> TransferGoal:
+    """One seeded goal from ``prior`` in this process, on envs of its own; its curve and wall-clock."""
     from glocal_ros.seeds import derived_seed
     from learner_node.evaluation import evaluate
     from learner_node.policies import PolicyRegistry
@@ -132,36 +149,38 @@ def run_goal(recipe: str, task: str, seed: int, settings: TransferSettings) -> T
     work = Path(tempfile.mkdtemp(prefix="glocal-bench-transfer-"))
     envs = BatchedEnvs(lambda i: GraspEnv(task), settings.num_envs, task)
     try:
-        policies = PolicyRegistry(PolicyStore(work / "policies"), [PolicyStore(assets_dir() / "priors")], seed=seed)
+        policies = PolicyRegistry(PolicyStore(work / "policies"), prior_stores(prior_store), seed=seed)
         started = time.perf_counter()
         # The episodes the goal's own step-0 evaluation would score (Trainer._evaluate_task's seed).
-        (start,) = evaluate(envs, policies.load(INITIAL_POLICY), [task], settings.eval_episodes,
+        (start,) = evaluate(envs, policies.load(prior), [task], settings.eval_episodes,
                             seed=derived_seed(seed, EVALUATION_STREAM, 0))
         curve = [(0, start.successes)]
         trainer = Trainer(envs, policies, work / "checkpoints", seed, checkpoint_interval=10**12,
                           fine_tuning=fine_tuning_recipe(recipe))
-        trainer.train(TrainSpec(task=task, initial_policy=INITIAL_POLICY, output_policy="transfer",
+        trainer.train(TrainSpec(task=task, initial_policy=prior, output_policy="transfer",
                                 step_budget=settings.step_budget, threshold=settings.threshold,
                                 eval_episodes=settings.eval_episodes, eval_interval=settings.eval_interval,
                                 seed=seed),
                       on_evaluation=lambda score, steps: curve.append((steps, score.successes)))
         return TransferGoal(recipe, task, seed, tuple(curve), settings.eval_episodes, settings.threshold,
-                            time.perf_counter() - started)
+                            time.perf_counter() - started, prior)
     finally:
         envs.close()
         shutil.rmtree(work, ignore_errors=True)
 
 
-def _run_goal(job: tuple[str, str, int, TransferSettings]) -> TransferGoal:
+def _run_goal(job: tuple[str, str, str, int, TransferSettings, Path | None]) -> TransferGoal:
     return run_goal(*job)
 
 
 def run_transfer_bench(recipes: Sequence[str], tasks: Sequence[str], seeds: Sequence[int],
-                       settings: TransferSettings, jobs: int = 1,
-                       log: Callable[[str], None] = print) -> list[TransferGoal]:
-    """Every (recipe, task, seed) goal, ``jobs`` at a time; in the order task, seed, recipe."""
-    _check(recipes, tasks, seeds, settings, jobs)
-    work = [(recipe, task, seed, settings) for task in tasks for seed in seeds for recipe in recipes]
+                       settings: TransferSettings, jobs: int = 1, log: Callable[[str], None] = print,
+                       priors: Sequence[str] = (INITIAL_POLICY,),
+                       prior_store: Path | None = None) -> list[TransferGoal]:
+    """Every (recipe, prior, task, seed) goal, ``jobs`` at a time; in the order task, seed, prior, recipe."""
+    _check(recipes, priors, prior_store, tasks, seeds, settings, jobs)
+    work = [(recipe, prior, task, seed, settings, prior_store)
+            for task in tasks for seed in seeds for prior in priors for recipe in recipes]
     goals = []
     # Spawned workers: pybullet and torch do not survive a fork of a process that uses them.
     with ProcessPoolExecutor(max_workers=jobs, mp_context=get_context("spawn")) as pool:
@@ -171,32 +190,42 @@ def run_transfer_bench(recipes: Sequence[str], tasks: Sequence[str], seeds: Sequ
     return goals
 
 
-def _check(recipes: Sequence[str], tasks: Sequence[str], seeds: Sequence[int], settings: TransferSettings,
-           jobs: int) -> None:
+def _check(recipes: Sequence[str], priors: Sequence[str], prior_store: Path | None, tasks: Sequence[str],
+           seeds: Sequence[int], settings: TransferSettings, jobs: int) -> None:
     """Raise ``ValueError`` for anything that would fail later, before any goal runs."""
+    from learner_node.policy_store import check_name
     from learner_node.sac_settings import fine_tuning_recipe
 
     for recipe in recipes:
         fine_tuning_recipe(recipe)
+    if prior_store is not None and not prior_store.is_dir():
+        raise ValueError(f"the prior store {prior_store} is not a directory")
+    stores = prior_stores(prior_store)
+    for prior in priors:
+        if not any(check_name(prior) in store for store in stores):
+            raise ValueError(f"no prior {prior!r} in {' or '.join(str(store.root) for store in stores)}")
     validate_tasks(list(tasks))
     settings.check()
-    if not recipes or not tasks or not seeds or jobs < 1:
-        raise ValueError("bench transfer needs a recipe, a task, a seed and at least one job")
-    if len(set(recipes)) != len(recipes) or len(set(tasks)) != len(tasks) or len(set(seeds)) != len(seeds):
-        raise ValueError("recipes, tasks and seeds must not repeat")
+    if not recipes or not priors or not tasks or not seeds or jobs < 1:
+        raise ValueError("bench transfer needs a recipe, a prior, a task, a seed and at least one job")
+    if any(len(set(values)) != len(values) for values in (recipes, priors, tasks, seeds)):
+        raise ValueError("recipes, priors, tasks and seeds must not repeat")
     if not all(0 <= seed <= MAX_SEED for seed in seeds):
         raise ValueError(f"seeds must lie in 0..{MAX_SEED}, got {list(seeds)}")
 
 
 def _goal_line(goal: TransferGoal) -> str:
-    return (f"{goal.recipe} {goal.task} seed {goal.seed}: " + " ".join(f"{s}:{score}" for s, score in goal.curve)
+    return (f"{goal.recipe} from {goal.prior} {goal.task} seed {goal.seed}: "
+            + " ".join(f"{s}:{score}" for s, score in goal.curve)
             + f" (steps to B {goal.steps_to_b if goal.steps_to_b is not None else '-'}, "
             f"drop {goal.drop_points:.0f} points, {goal.wall_s:.0f} s)")
 
 
 def run_transfer_graph(recipes: Sequence[str], tasks: Sequence[str], seeds: Sequence[int],
-                       settings: TransferSettings, log: Callable[[str], None] = print) -> list[TransferGoal]:
-    """The goals of ``run_transfer_bench`` through sim_node + learner_node processes, one pair per recipe."""
+                       settings: TransferSettings, log: Callable[[str], None] = print,
+                       priors: Sequence[str] = (INITIAL_POLICY,),
+                       prior_store: Path | None = None) -> list[TransferGoal]:
+    """The goals of ``run_transfer_bench`` through sim_node + learner_node processes, one pair per arm."""
     import threading
     from contextlib import ExitStack
 
@@ -208,23 +237,27 @@ def run_transfer_graph(recipes: Sequence[str], tasks: Sequence[str], seeds: Sequ
     from glocal_ros.curriculum.learner import TrainRequest
     from glocal_ros.domain import reserve_domain_id
     from glocal_ros.seeds import derived_seed
+    from learner_node.policy_store import PolicyStore
     from learner_node.training import EVALUATION_STREAM
     from node_common import names, qos
 
-    _check(recipes, tasks, seeds, settings, 1)
+    _check(recipes, priors, prior_store, tasks, seeds, settings, 1)
     domain_id, lock = reserve_domain_id()
     work = Path(tempfile.mkdtemp(prefix="glocal-bench-transfer-graph-"))
     env = isolated_environment(domain_id, work / "logs")
     timeout = 600.0
     stack = ExitStack()
 
-    def pair(index: int, recipe: str) -> Callable[[], list[TransferGoal]]:
+    def pair(index: int, recipe: str, prior: str) -> Callable[[], list[TransferGoal]]:
         namespace = f"/transfer{index}"
         remap = ("-r", f"__ns:={namespace}")
+        policy_dir = work / f"policies{index}"
+        source = next(store for store in prior_stores(prior_store) if prior in store)
+        PolicyStore(policy_dir).add_copy(source, prior, prior)
         processes = [NodeProcess("sim_node", work / "logs", {"num_envs": settings.num_envs, "initial_task": tasks[0]},
                                  env=env, extra_args=remap),
                      NodeProcess("learner_node", work / "logs",
-                                 {"policy_dir": str(work / f"policies{index}"), "fine_tuning": recipe, "seed": 0,
+                                 {"policy_dir": str(policy_dir), "fine_tuning": recipe, "seed": 0,
                                   "checkpoint_interval": 10_000_000}, env=env, extra_args=remap)]
         stack.callback(lambda: [process.stop() for process in reversed(processes)])
         node = stack.enter_context(multithreaded_node(f"bench_transfer{index}", domain_id, namespace=namespace))
@@ -247,9 +280,9 @@ def run_transfer_graph(recipes: Sequence[str], tasks: Sequence[str], seeds: Sequ
                 for seed in seeds:
                     output = f"transfer-{task}-{seed}"
                     started = time.perf_counter()
-                    start = learner.evaluate(INITIAL_POLICY, [task], settings.eval_episodes,
+                    start = learner.evaluate(prior, [task], settings.eval_episodes,
                                              seed=derived_seed(seed, EVALUATION_STREAM, 0))[task]
-                    learner.train(TrainRequest(task, INITIAL_POLICY, output, settings.step_budget,
+                    learner.train(TrainRequest(task, prior, output, settings.step_budget,
                                                threshold=settings.threshold, eval_episodes=settings.eval_episodes,
                                                eval_interval=settings.eval_interval, stop_when_learned=False,
                                                seed=seed))
@@ -257,12 +290,12 @@ def run_transfer_graph(recipes: Sequence[str], tasks: Sequence[str], seeds: Sequ
                     expected = settings.step_budget // settings.eval_interval
                     with heard:  # the last evaluation's message may trail the result
                         if not heard.wait_for(lambda: len(scores.get(output, ())) >= expected, timeout):
-                            raise RuntimeError(f"{recipe}: {len(scores.get(output, ()))} of {expected} evaluations "
-                                               f"of {output} heard; see the logs in {work / 'logs'}")
+                            raise RuntimeError(f"{recipe} from {prior}: {len(scores.get(output, ()))} of {expected} "
+                                               f"evaluations of {output} heard; see the logs in {work / 'logs'}")
                         curve = [(0, int(start))] + [((k + 1) * settings.eval_interval, score)
                                                      for k, score in enumerate(scores[output][:expected])]
                     goal = TransferGoal(recipe, task, seed, tuple(curve), settings.eval_episodes,
-                                        settings.threshold, wall_s)
+                                        settings.threshold, wall_s, prior)
                     log(_goal_line(goal))
                     done.append(goal)
             return done
@@ -270,14 +303,15 @@ def run_transfer_graph(recipes: Sequence[str], tasks: Sequence[str], seeds: Sequ
         return goals
 
     try:
-        runs = [pair(index, recipe) for index, recipe in enumerate(recipes)]
+        arms = [(recipe, prior) for prior in priors for recipe in recipes]
+        runs = [pair(index, recipe, prior) for index, (recipe, prior) in enumerate(arms)]
         with ThreadPoolExecutor(len(runs)) as pool:
-            per_recipe = list(pool.map(lambda run: run(), runs))
+            per_arm = list(pool.map(lambda run: run(), runs))
     finally:
         stack.close()
         lock.close()
     order = {(task, seed): i for i, (task, seed) in enumerate((t, s) for t in tasks for s in seeds)}
-    return sorted((g for goals in per_recipe for g in goals), key=lambda g: order[(g.task, g.seed)])
+    return sorted((g for goals in per_arm for g in goals), key=lambda g: order[(g.task, g.seed)])
 
 
 def _median_steps_to_b(goals: Sequence[TransferGoal]) -> float:
@@ -287,18 +321,20 @@ def _median_steps_to_b(goals: Sequence[TransferGoal]) -> float:
 
 def transfer_bench_report(goals: Sequence[TransferGoal], command: str, settings: TransferSettings,
                           jobs: int, graph: bool = False) -> str:
-    recipes = list(dict.fromkeys(g.recipe for g in goals))
+    arms = list(dict.fromkeys(g.arm for g in goals))
     tasks = list(dict.fromkeys(g.task for g in goals))
     seeds = sorted({g.seed for g in goals})
+    priors = list(dict.fromkeys(g.prior for g in goals))
     lines = [
-        "# bench transfer: fine-tuning the A0 prior, recipe by recipe",
+        "# bench transfer: fine-tuning an A0 prior, recipe by recipe",
         "",
         f"Command: `{command}`  ",
         f"{time.strftime('%Y-%m-%d %H:%M')}, Python {sys.version.split()[0]}, {os.cpu_count()} CPU cores, "
-        + ("through the graph (a sim_node and a learner_node per recipe, the recipes at once)" if graph else
+        + ("through the graph (a sim_node and a learner_node per arm, the arms at once)" if graph else
            f"in-process, {jobs} goal{'s' if jobs != 1 else ''} at a time")
         + f". Load average at the end {os.getloadavg()[0]:.1f} (the machine is shared). One seeded Train goal "
-        f"per recipe, task and seed from `{INITIAL_POLICY}`: {settings.step_budget} training steps on "
+        f"per recipe, prior ({', '.join(f'`{prior}`' for prior in priors)}), task and seed: "
+        f"{settings.step_budget} training steps on "
         f"{settings.num_envs} envs, scored every "
         f"{settings.eval_interval} steps over {settings.eval_episodes} deterministic episodes, not stopped when "
         f"learned; B = {settings.threshold:g}. Tasks {', '.join(tasks)}; seeds {', '.join(map(str, seeds))}. "
@@ -306,25 +342,26 @@ def transfer_bench_report(goals: Sequence[TransferGoal], command: str, settings:
         f"that never passed as slower than all. Collapse: a score {COLLAPSE_POINTS:g} or more points of 100 "
         f"below the start from step {COLLAPSE_AFTER} on. Wall-clock per goal includes its evaluations.",
         "",
-        "| recipe | goals | passed B | median steps to B | collapses | median drop (points) | median final score "
-        "| median wall-clock per goal (s) |",
-        "| --- | ---: | ---: | ---: | ---: | ---: | ---: | ---: |",
+        "| recipe | prior | goals | passed B | median steps to B | collapses | median drop (points) "
+        "| median final score | median wall-clock per goal (s) |",
+        "| --- | --- | ---: | ---: | ---: | ---: | ---: | ---: | ---: |",
     ]
-    for recipe in recipes:
-        mine = [g for g in goals if g.recipe == recipe]
+    for recipe, prior in arms:
+        mine = [g for g in goals if g.arm == (recipe, prior)]
         median = _median_steps_to_b(mine)
         lines.append(
-            f"| {recipe} | {len(mine)} | {sum(g.steps_to_b is not None for g in mine)} "
+            f"| {recipe} | {prior} | {len(mine)} | {sum(g.steps_to_b is not None for g in mine)} "
             f"| {'never' if math.isinf(median) else f'{median:.0f}'} | {sum(g.collapsed for g in mine)} "
             f"| {statistics.median(g.drop_points for g in mine):.0f} "
             f"| {statistics.median(g.final for g in mine):.0f} / {settings.eval_episodes} "
             f"| {statistics.median(g.wall_s for g in mine):.0f} |")
     steps = [s for s, _ in goals[0].curve] if goals else []
     lines += ["", "Every goal (scores out of " f"{settings.eval_episodes} at each step):", "",
-              "| recipe | task | seed | " + " | ".join(str(s) for s in steps) + " | steps to B | drop | s |",
-              "| --- | --- | ---: | " + " | ".join("---:" for _ in steps) + " | ---: | ---: | ---: |"]
+              "| recipe | prior | task | seed | " + " | ".join(str(s) for s in steps) + " | steps to B | drop | s |",
+              "| --- | --- | --- | ---: | " + " | ".join("---:" for _ in steps) + " | ---: | ---: | ---: |"]
     for g in goals:
-        lines.append(f"| {g.recipe} | {g.task} | {g.seed} | " + " | ".join(str(score) for _, score in g.curve)
+        lines.append(f"| {g.recipe} | {g.prior} | {g.task} | {g.seed} | "
+                     + " | ".join(str(score) for _, score in g.curve)
                      + f" | {'-' if g.steps_to_b is None else g.steps_to_b} | {g.drop_points:.0f} "
                      f"| {g.wall_s:.0f} |")
     return "\n".join(lines) + "\n"
