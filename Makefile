@@ -25,9 +25,9 @@ $(STAMPS)/deps: requirements.txt constraints.txt | $(PY)
 	$(PIP) install -q -r requirements.txt -c constraints.txt
 	@mkdir -p $(STAMPS) && touch $@
 
-# The build script skips itself when msg_schemas/ is unchanged.
-$(STAMPS)/interfaces: $(STAMPS)/deps $(shell find msg_schemas -type f) tools/build_interfaces.py
-	$(PY) tools/build_interfaces.py --build $(VENV)/build/glocal_interfaces
+# The build script skips each interface package whose sources did not change.
+$(STAMPS)/interfaces: $(STAMPS)/deps $(shell find msg_schemas tools/tf2_msgs -type f) tools/build_interfaces.py
+	$(PY) tools/build_interfaces.py --build $(VENV)/build
 	@touch $@
 
 # Editable install for the Python packages, plus setup.py's data_files (the

@@ -30,9 +30,17 @@ EPISODES_QOS = QosSpec(reliable=True, transient_local=False, depth=1000)
 LATCHED_QOS = QosSpec(reliable=True, transient_local=True, depth=10)
 #: Reliable event streams that are not latched (evaluations, training progress).
 EVENTS_QOS = QosSpec(reliable=True, transient_local=False, depth=100)
-#: Throttled viewer streams (joint states, object pose, grasp state): a lost
-#: sample is replaced by the next one.
-VIEWER_QOS = QosSpec(reliable=False, transient_local=False, depth=5)
+#: Throttled viewer streams (joint states, object pose, grasp state, /tf): reliable with a small
+#: queue, which reliable and best-effort subscribers alike accept (a tutorial-style
+#: ``create_subscription(T, name, cb, 10)`` is reliable and would get nothing from a best-effort
+#: publisher); joint_state_broadcaster and robot_state_publisher offer the same.
+VIEWER_QOS = QosSpec(reliable=True, transient_local=False, depth=10)
+#: What a viewer that starts late must still get at once: robot_description, /tf_static, the
+#: object marker (as robot_state_publisher offers them: reliable, transient local, depth 1).
+DESCRIPTION_QOS = QosSpec(reliable=True, transient_local=True, depth=1)
+#: /clock: one message per lockstep step. Reliable is accepted by rclpy's own best-effort
+#: time-source subscription and by reliable ones.
+CLOCK_QOS = QosSpec(reliable=True, transient_local=False, depth=10)
 
 
 @dataclass(frozen=True)
@@ -59,11 +67,16 @@ EVALUATIONS = TopicSpec("/glocal/evaluations", "glocal_interfaces/msg/Evaluation
 JOINT_STATES = TopicSpec("/joint_states", "sensor_msgs/msg/JointState", VIEWER_QOS, recorded=True)
 OBJECT_POSE = TopicSpec("/glocal/object_pose", "geometry_msgs/msg/PoseStamped", VIEWER_QOS, recorded=True)
 GRASP_STATE = TopicSpec("/glocal/grasp_state", "glocal_interfaces/msg/GraspState", VIEWER_QOS, recorded=True)
+ROBOT_DESCRIPTION = TopicSpec("/robot_description", "std_msgs/msg/String", DESCRIPTION_QOS, recorded=True)
+TF = TopicSpec("/tf", "tf2_msgs/msg/TFMessage", VIEWER_QOS, recorded=True)
+TF_STATIC = TopicSpec("/tf_static", "tf2_msgs/msg/TFMessage", DESCRIPTION_QOS, recorded=True)
+OBJECT_MARKER = TopicSpec("/glocal/object_marker", "visualization_msgs/msg/Marker", DESCRIPTION_QOS, recorded=True)
+CLOCK = TopicSpec("/clock", "rosgraph_msgs/msg/Clock", CLOCK_QOS, recorded=True)
 
 #: Every topic of the graph, with the QoS its publisher offers.
 GRAPH_TOPICS: tuple[TopicSpec, ...] = (
     EPISODES, CURRICULUM_STATE, TASK_ASSIGNMENT, TRAINING_PROGRESS, EVALUATIONS, JOINT_STATES, OBJECT_POSE,
-    GRASP_STATE,
+    GRASP_STATE, ROBOT_DESCRIPTION, TF, TF_STATIC, OBJECT_MARKER, CLOCK,
 )
 #: What recorder_node writes to a run's bag.
 RECORDED_TOPICS: tuple[TopicSpec, ...] = tuple(topic for topic in GRAPH_TOPICS if topic.recorded)

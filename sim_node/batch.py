@@ -40,6 +40,8 @@ class BatchEnv(Protocol):
 
     def object_pose(self) -> tuple[np.ndarray, np.ndarray]: ...
 
+    def link_poses(self) -> dict[str, tuple[tuple[float, ...], tuple[float, ...]]]: ...
+
     def grasp_state(self) -> GraspState: ...
 
     def close(self) -> None: ...
@@ -55,6 +57,7 @@ class EnvSnapshot:
     object_orientation: np.ndarray  # quaternion x, y, z, w
     grasp: GraspState
     lifted: bool  # lifted above the success height
+    link_poses: dict[str, tuple[tuple[float, ...], tuple[float, ...]]]  # robot link -> world (position, xyzw)
 
 
 def normalize_reset(
@@ -239,7 +242,7 @@ class BatchedEnvs:
         position, orientation = env.object_pose()
         grasp = env.grasp_state()
         return EnvSnapshot(self.tasks[index], env.joint_positions(), position, orientation, grasp,
-                           grasp.object_lift > env.config.success_height)
+                           grasp.object_lift > env.config.success_height, env.link_poses())
 
     def close(self) -> None:
         for env in self.envs:

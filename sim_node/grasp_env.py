@@ -246,6 +246,10 @@ class GraspEnv(gym.Env[np.ndarray, np.ndarray]):
         """Position (m) and orientation (quaternion xyzw) of the object's URDF link frame, world frame."""
         return self.world.object_pose()
 
+    def link_poses(self) -> dict[str, tuple[tuple[float, ...], tuple[float, ...]]]:
+        """World pose (position, quaternion xyzw) of each of the robot's URDF links, by name."""
+        return self.world.robot.link_poses()
+
     def grasp_state(self) -> GraspState:
         """Contacts, opening and lift as of the latest reset or step (no physics queries)."""
         if self._state is None:

@@ -16,6 +16,8 @@ import pybullet
 import pybullet_data
 from pybullet_utils.bullet_client import BulletClient
 
+from sim_node.robot_description import PANDA_URDF
+
 ARM_JOINT_INDICES: tuple[int, ...] = (0, 1, 2, 3, 4, 5, 6)
 FINGER_JOINT_INDICES: tuple[int, int] = (9, 10)
 LEFT_FINGER_LINK, RIGHT_FINGER_LINK = FINGER_JOINT_INDICES
@@ -85,7 +87,13 @@ class PandaRobot:
     def __init__(self, client: BulletClient):
         self._client = client
         client.setAdditionalSearchPath(pybullet_data.getDataPath())
-        self.body = client.loadURDF("franka_panda/panda.urdf", useFixedBase=True)
+        self.body = client.loadURDF(PANDA_URDF, useFixedBase=True)
+        # PyBullet numbers a link as its parent joint; the base (-1) is the URDF's root link.
+        self._link_names = [client.getBodyInfo(self.body)[0].decode()] + [
+            client.getJointInfo(self.body, joint)[12].decode() for joint in range(client.getNumJoints(self.body))
+        ]
+        base_inertial = client.getDynamicsInfo(self.body, -1)[3:5]
+        self._base_link_from_inertial = client.invertTransform(*base_inertial)
         self.reset()
 
     def reset(self) -> None:
@@ -129,6 +137,21 @@ class PandaRobot:
     def joint_positions(self) -> np.ndarray:
         """Positions of the joints named in ``JOINT_NAMES``, in that order (rad, and m for fingers)."""
         return np.array([state[0] for state in self._client.getJointStates(self.body, _MOVABLE_JOINTS)])
+
+    def link_poses(self) -> dict[str, tuple[tuple[float, ...], tuple[float, ...]]]:
+        """World pose (position, quaternion xyzw) of every URDF link's frame, by link name.
+
+        These are the frames of the URDF (what viewers place meshes in), not
+        PyBullet's inertial frames: for the base that needs the inertial
+        offset undone; for the other links PyBullet reports the link frame.
+        """
+        base = self._client.getBasePositionAndOrientation(self.body)
+        poses = {self._link_names[0]: self._client.multiplyTransforms(*base, *self._base_link_from_inertial)}
+        states = self._client.getLinkStates(self.body, range(len(self._link_names) - 1),
+                                            computeForwardKinematics=True)
+        for name, state in zip(self._link_names[1:], states):
+            poses[name] = (state[4], state[5])
+        return poses
 
     def gripper_opening(self) -> float:
         """Distance between the finger pads (m), 0 closed to 0.08 fully open."""

@@ -2,9 +2,19 @@
 
 Services: ``sim/reset`` (glocal_interfaces/srv/ResetEnvs), ``sim/step``
 (glocal_interfaces/srv/StepEnvs). Topics: ``glocal/episodes`` (one
-EpisodeRecord per finished episode, reliable, seq-numbered), and for viewers,
-throttled and best effort, ``joint_states``, ``glocal/object_pose`` and
-``glocal/grasp_state`` of the env named by ``viewer_env``.
+EpisodeRecord per finished episode, reliable, seq-numbered), ``clock``, and
+for viewers, at ``viewer_rate_hz``, the robot model, TF and the object of the
+env named by ``viewer_env`` (``sim_node.viewer``).
+
+Time: the sim has its own clock, which starts at 0 and advances by one
+control period (``substeps`` x physics step, 1/24 s) per lockstep
+``sim/step`` call; it is published on ``clock`` after every step. With
+``use_sim_time:=true`` every stamp the node sends (episodes, viewer topics)
+is that clock, and the viewer topics are sent each time it passes a multiple
+of 1 / ``viewer_rate_hz``: a seeded run then sends the same stamps every
+time. The default is ``use_sim_time:=false``, as for any ROS node: stamps
+are wall-clock and the viewer topics follow a wall-clock timer, which keeps
+a viewer up to date while the sim waits between requests.
 
 With ``workers`` > 1 the envs are split over worker processes that step
 their shares in parallel (``sim_node.parallel``); by default one per core.
@@ -14,12 +24,15 @@ from __future__ import annotations
 
 import os
 
-from geometry_msgs.msg import PoseStamped
-from glocal_interfaces.msg import EpisodeRecord, GraspState
+from pathlib import Path
+
+from builtin_interfaces.msg import Time
+from glocal_interfaces.msg import EpisodeRecord
 from glocal_interfaces.srv import ResetEnvs, StepEnvs
 from rclpy.callback_groups import MutuallyExclusiveCallbackGroup
 from rclpy.node import Node
-from sensor_msgs.msg import JointState
+from rclpy.time import Time as RclpyTime
+from rosgraph_msgs.msg import Clock
 
 from glocal_ros.paths import objects_dir
 from glocal_ros.sim_contract import EpisodeLog
@@ -31,8 +44,21 @@ from node_common.services import answers_errors
 from sim_node.batch import BatchedEnvs
 from sim_node.parallel import ProcessBatchedEnvs
 from sim_node.grasp_env import GraspEnv, GraspEnvConfig
+from sim_node.viewer import WORLD_FRAME, ViewerPublisher
 
-WORLD_FRAME = "world"
+
+class SimClock:
+    """The sim's time: ``period_ns`` per lockstep step, from 0."""
+
+    def __init__(self, period_ns: int):
+        self.period_ns = period_ns
+        self.now_ns = 0
+
+    def advance(self) -> None:
+        self.now_ns += self.period_ns
+
+    def stamp(self) -> Time:
+        return RclpyTime(nanoseconds=self.now_ns).to_msg()
 
 
 class SimNode(Node):
@@ -46,7 +72,8 @@ class SimNode(Node):
                             min_value=1, max_value=10_000)
         self.viewer_env = declare(self, "viewer_env", 0, "env whose state is published for viewers",
                                   min_value=0, max_value=255)
-        viewer_rate = declare(self, "viewer_rate_hz", 10.0, "rate of joint_states, object_pose and grasp_state; 0 = off",
+        viewer_rate = declare(self, "viewer_rate_hz", 10.0, "rate of the viewer topics (TF, joint_states, object "
+                              "pose and marker, grasp_state), in sim time with use_sim_time; 0 = off",
                               min_value=0.0, max_value=240.0)
         if self.viewer_env >= num_envs:
             raise ValueError(f"viewer_env {self.viewer_env} must be below num_envs {num_envs}")
@@ -68,17 +95,24 @@ class SimNode(Node):
                 num_envs, initial_task, seed=seed,
             )
         self.episode_seq = 0
+        self.sim_clock = SimClock(round(config.substeps * config.timestep * 1e9))
+        self.use_sim_time = bool(self.get_parameter("use_sim_time").value)
 
         # pybullet clients are not thread-safe: one group serialises every env access.
         sim_group = MutuallyExclusiveCallbackGroup()
         self.create_service(ResetEnvs, names.SIM_RESET, self.on_reset, callback_group=sim_group)
         self.create_service(StepEnvs, names.SIM_STEP, self.on_step, callback_group=sim_group)
         self.episodes_pub = self.create_publisher(EpisodeRecord, names.EPISODES, qos.EPISODES)
-        self.joint_pub = self.create_publisher(JointState, names.JOINT_STATES, qos.VIEWER)
-        self.pose_pub = self.create_publisher(PoseStamped, names.OBJECT_POSE, qos.VIEWER)
-        self.grasp_pub = self.create_publisher(GraspState, names.GRASP_STATE, qos.VIEWER)
+        self.clock_pub = self.create_publisher(Clock, names.CLOCK, qos.CLOCK)
+        self.viewer: ViewerPublisher | None = None
+        self.viewer_period_ns = 0
+        self.next_viewer_ns = 0
         if viewer_rate > 0:
-            self.create_timer(1.0 / viewer_rate, self.publish_viewer_state, callback_group=sim_group)
+            self.viewer = ViewerPublisher(self, Path(objects))
+            self.viewer.publish_static(self.batch.snapshot(self.viewer_env), self.stamp())
+            self.viewer_period_ns = round(1e9 / viewer_rate)
+            if not self.use_sim_time:
+                self.create_timer(1.0 / viewer_rate, self.publish_viewer_state, callback_group=sim_group)
         self.get_logger().info(
             f"{num_envs} envs in {workers} process{'es' if workers > 1 else ''} on task {initial_task}, "
             f"obs {self.batch.obs_dim}, action {self.batch.action_dim}"
@@ -103,7 +137,12 @@ class SimNode(Node):
             from_float32_field(request.actions), request.next_tasks, request.phase,
             request.policy_name, request.global_step,
         )
+        self.sim_clock.advance()
+        self.clock_pub.publish(Clock(clock=self.sim_clock.stamp()))
         self._publish_episodes(result.finished)
+        if self.viewer is not None and self.use_sim_time and self.sim_clock.now_ns >= self.next_viewer_ns:
+            self.publish_viewer_state()
+            self.next_viewer_ns = self.sim_clock.now_ns + self.viewer_period_ns
         response.observations = to_float32_field(result.observations)
         response.rewards = to_float32_field(result.rewards)
         response.terminated = result.terminated.tolist()
@@ -120,7 +159,7 @@ class SimNode(Node):
 
     def _episode_record(self, log: EpisodeLog) -> EpisodeRecord:
         record = EpisodeRecord()
-        record.header.stamp = self.get_clock().now().to_msg()
+        record.header.stamp = self.stamp()
         record.header.frame_id = WORLD_FRAME
         record.seq = self.episode_seq
         self.episode_seq += 1
@@ -136,29 +175,13 @@ class SimNode(Node):
         record.success, record.truncated, record.interrupted = log.success, log.truncated, log.interrupted
         return record
 
+    def stamp(self) -> Time:
+        """Now: the sim's clock with use_sim_time, else the node's (wall) clock."""
+        return self.sim_clock.stamp() if self.use_sim_time else self.get_clock().now().to_msg()
+
     def publish_viewer_state(self) -> None:
-        snapshot = self.batch.snapshot(self.viewer_env)
-        stamp = self.get_clock().now().to_msg()
-        joints = JointState()
-        joints.header.stamp = stamp
-        joints.name = self.batch.joint_names
-        joints.position = snapshot.joint_positions.astype(float).tolist()
-        self.joint_pub.publish(joints)
-
-        pose = PoseStamped()
-        pose.header.stamp, pose.header.frame_id = stamp, WORLD_FRAME
-        pose.pose.position.x, pose.pose.position.y, pose.pose.position.z = (float(v) for v in snapshot.object_position)
-        (pose.pose.orientation.x, pose.pose.orientation.y,
-         pose.pose.orientation.z, pose.pose.orientation.w) = (float(v) for v in snapshot.object_orientation)
-        self.pose_pub.publish(pose)
-
-        grasp = snapshot.grasp
-        self.grasp_pub.publish(GraspState(
-            header=pose.header, env_index=self.viewer_env, task=snapshot.task, step=grasp.step,
-            left_finger_contact=grasp.left_contact, right_finger_contact=grasp.right_contact,
-            gripper_opening=float(grasp.gripper_opening), object_lift=float(grasp.object_lift),
-            success=snapshot.lifted,
-        ))
+        self.viewer.publish(self.batch.snapshot(self.viewer_env), self.viewer_env, self.batch.joint_names,
+                            self.stamp())
 
     def close(self) -> None:
         self.batch.close()

@@ -39,6 +39,16 @@ def test_colcon_build_installs_runnable_nodes(tmp_path):
     assert build.returncode == 0, build.stdout + build.stderr
     assert "2 packages finished" in build.stdout
 
+    # Every mesh robot_description names resolves in the installed package, as RViz resolves package://.
+    from glocal_ros.urdf import parse_urdf
+    from sim_node.robot_description import robot_description
+
+    share = workspace / "install" / "glocal_ros" / "share"
+    meshes = {visual.mesh for visuals in parse_urdf(robot_description()).visuals.values() for visual in visuals}
+    assert meshes
+    for mesh in meshes:
+        assert (share / mesh.removeprefix("package://")).is_file(), mesh
+
     executable = workspace / "install" / "glocal_ros" / "lib" / "glocal_ros" / "curriculum_node"
     assert executable.is_file() and os.access(executable, os.X_OK)
     # Started away from the checkout, so that only install/ can provide the packages; with

@@ -1,4 +1,6 @@
-"""Build the ``glocal_interfaces`` package (msg_schemas/) into this Python's prefix.
+"""Build the interface packages into this Python's prefix: ``glocal_interfaces``
+(msg_schemas/) and ``tf2_msgs`` (tools/tf2_msgs/: TFMessage as upstream, which
+the ROS 2 wheels lack).
 
 Run with the virtual environment's interpreter: the ROS wheels' bootstrapper
 has then already put the ROS libraries on ``LD_LIBRARY_PATH``, which the
@@ -6,8 +8,8 @@ rosidl generators that CMake runs need.
 
 The ROS 2 Jazzy wheels ship CMake config files that name the wheel builder's
 Python (``/opt/python/cp311-cp311/...``); they are rewritten to this Python's
-include directory and NumPy's before configuring. The build is skipped when
-the installed package was built from the same sources (a content hash).
+include directory and NumPy's before configuring. Each package's build is
+skipped when it was installed from the same sources (a content hash).
 """
 
 from __future__ import annotations
@@ -51,26 +53,27 @@ def rewrite_wheel_builder_paths(prefix: Path) -> int:
     return rewritten
 
 
-def main() -> int:
-    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("--source", type=Path, default=Path(__file__).resolve().parent.parent / "msg_schemas")
-    parser.add_argument("--build", type=Path, default=Path(sys.prefix) / "build" / "glocal_interfaces")
-    parser.add_argument("--force", action="store_true", help="rebuild even if the sources did not change")
-    args = parser.parse_args()
+REPO = Path(__file__).resolve().parent.parent
+#: Built in this order: (name, source folder).
+PACKAGES: tuple[tuple[str, Path], ...] = (
+    ("tf2_msgs", REPO / "tools" / "tf2_msgs"),
+    ("glocal_interfaces", REPO / "msg_schemas"),
+)
 
+
+def build(package: str, source: Path, build_dir: Path, force: bool) -> None:
+    """Configure, build and install one interface package into this Python's prefix, unless up to date."""
     prefix = Path(sys.prefix)
-    stamp = prefix / "share" / "glocal_interfaces" / "sources.sha256"
-    digest = sources_digest(args.source)
-    if not args.force and stamp.exists() and stamp.read_text().strip() == digest:
-        print(f"glocal_interfaces is up to date in {prefix}")
-        return 0
-
-    print(f"rewrote wheel-builder paths in {rewrite_wheel_builder_paths(prefix)} CMake files")
+    stamp = prefix / "share" / package / "sources.sha256"
+    digest = sources_digest(source)
+    if not force and stamp.exists() and stamp.read_text().strip() == digest:
+        print(f"{package} is up to date in {prefix}")
+        return
     cmake = ["cmake"]
     subprocess.run(
         cmake
         + [
-            "-S", str(args.source), "-B", str(args.build),
+            "-S", str(source), "-B", str(build_dir),
             f"-DCMAKE_PREFIX_PATH={prefix}",
             f"-DCMAKE_INSTALL_PREFIX={prefix}",
             f"-DPython3_EXECUTABLE={sys.executable}",
@@ -79,10 +82,22 @@ def main() -> int:
         ],
         check=True,
     )
-    subprocess.run(cmake + ["--build", str(args.build), "--parallel", "2"], check=True)
-    subprocess.run(cmake + ["--install", str(args.build)], check=True)
+    subprocess.run(cmake + ["--build", str(build_dir), "--parallel", "2"], check=True)
+    subprocess.run(cmake + ["--install", str(build_dir)], check=True)
     stamp.write_text(digest + "\n")
-    print(f"glocal_interfaces installed into {prefix}")
+    print(f"{package} installed into {prefix}")
+
+
+def main() -> int:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--build", type=Path, default=Path(sys.prefix) / "build",
+                        help="folder of the CMake build trees, one per package")
+    parser.add_argument("--force", action="store_true", help="rebuild even if the sources did not change")
+    args = parser.parse_args()
+
+    print(f"rewrote wheel-builder paths in {rewrite_wheel_builder_paths(Path(sys.prefix))} CMake files")
+    for package, source in PACKAGES:
+        build(package, source, args.build / package, args.force)
     return 0
 
 
