@@ -33,7 +33,7 @@ $(STAMPS)/interfaces: $(STAMPS)/deps $(shell find msg_schemas tools/tf2_msgs -ty
 # Editable install for the Python packages, plus setup.py's data_files (the
 # ament index marker, package.xml, lib/glocal_ros executables, assets) copied
 # into the venv prefix, which an editable install leaves out.
-$(STAMPS)/package: $(STAMPS)/deps setup.py setup.cfg package.xml $(wildcard bin/*) $(shell find assets -type f 2>/dev/null)
+$(STAMPS)/package: $(STAMPS)/deps setup.py setup.cfg package.xml $(wildcard bin/*) $(wildcard launch/*) $(shell find assets -type f 2>/dev/null)
 	$(PIP) install -q --no-deps --no-build-isolation -e .
 	$(PY) setup.py -q install_data -d $(VENV) 2>/dev/null
 	@touch $@

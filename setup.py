@@ -10,6 +10,7 @@ where ``ros2 run`` looks on a full ROS 2 install (pip ignores setup.cfg's
 ``install_scripts``, colcon honours it).
 """
 
+import importlib.util
 import os
 import runpy
 from pathlib import Path
@@ -32,6 +33,23 @@ def asset_files() -> list[tuple[str, list[str]]]:
     return entries
 
 
+def panda_mesh_files() -> list[tuple[str, list[str]]]:
+    """The Panda meshes of pybullet_data, into share/glocal_ros/robots/franka_panda (sim_node.robot_description).
+
+    Found without importing pybullet, which must be installed before this package (make setup does).
+    Paths relative to this folder: colcon refuses absolute ones.
+    """
+    spec = importlib.util.find_spec("pybullet_data")
+    if spec is None or not spec.submodule_search_locations:
+        raise SystemExit("pybullet (pybullet_data) must be installed before glocal_ros: its Panda meshes are "
+                         "installed for viewers")
+    panda = Path(list(spec.submodule_search_locations)[0]) / "franka_panda"
+    return [(f"share/{PACKAGE}/robots/franka_panda/{folder.relative_to(panda)}",
+             sorted(os.path.relpath(f, HERE) for f in folder.iterdir() if f.is_file()))
+            for folder in sorted(panda.rglob("*")) if folder.is_dir()] + \
+        [(f"share/{PACKAGE}/robots/franka_panda", [os.path.relpath(panda / "LICENSE.txt", HERE)])]
+
+
 setup(
     name=PACKAGE,
     version="0.1.0",
@@ -41,7 +59,11 @@ setup(
         ("share/ament_index/resource_index/packages", [f"resource/{PACKAGE}"]),
         (f"share/{PACKAGE}", ["package.xml"]),
         (f"lib/{PACKAGE}", [f"bin/{node}" for node in NODES]),
+        # `ros2 launch glocal_ros glocal.launch.py` finds launch files in share/<package>/launch.
+        (f"share/{PACKAGE}/launch",
+         sorted(str(path.relative_to(HERE)) for path in (HERE / "launch").glob("*.launch.py"))),
         *asset_files(),
+        *panda_mesh_files(),
     ],
     install_requires=["setuptools"],
     zip_safe=False,

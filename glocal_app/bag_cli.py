@@ -1,4 +1,4 @@
-"""``glocal-ros replay`` and ``glocal-ros bag check|repair``: the command-line side of recorded bags.
+"""``glocal-ros replay`` and ``glocal-ros bag check|repair|render``: the command-line side of recorded bags.
 
 Only argparse lives here: each command imports what it runs when it runs,
 so that ``glocal-ros`` stays importable without rclpy (replay needs it, the
@@ -19,17 +19,24 @@ def cmd_replay(args: argparse.Namespace) -> int:
 
 
 def cmd_bag_check(args: argparse.Namespace) -> int:
-    """Messages per topic and the episode sequence; exit code 1 when episodes are missing or repeated."""
-    from glocal_ros.recording import episode_sequence, message_counts
+    """Messages per topic and the episode sequence; exit code 1 when episodes are missing or repeated.
+
+    The episodes topic is found under whatever namespace the bag was recorded
+    in; a bag of several sim nodes (one namespace each) gets one check per node.
+    """
+    from glocal_ros.recording import episode_sequence, episode_topics, message_counts
     from glocal_ros.topics import EPISODES_TOPIC
 
     counts = message_counts(args.bag)
     width = max((len(topic) for topic in counts), default=0)
     for topic, count in counts.items():
         print(f"{topic:<{width}}  {count:>8}")
-    check = episode_sequence(args.bag)
-    print(f"{EPISODES_TOPIC}: {check.summary()}")
-    return 0 if check.ok else 1
+    ok = True
+    for topic in episode_topics(args.bag) or [EPISODES_TOPIC]:
+        check = episode_sequence(args.bag, topic)
+        print(f"{topic}: {check.summary()}")
+        ok = ok and check.ok
+    return 0 if ok else 1
 
 
 def cmd_bag_repair(args: argparse.Namespace) -> int:
@@ -72,7 +79,8 @@ def add_bag_commands(commands: argparse._SubParsersAction) -> None:
                              "(default 5)")
     replay.set_defaults(func=cmd_replay)
 
-    bag = commands.add_parser("bag", help="recorded bags: check (counts, episode gaps), repair (a killed recorder's)")
+    bag = commands.add_parser("bag", help="recorded bags: check (counts, episode gaps), repair (a killed recorder's), "
+                                  "render (one frame, from the bag alone)")
     bag_commands = bag.add_subparsers(dest="bag_command", required=True)
     check = bag_commands.add_parser("check", help="messages per topic and gaps in the episode seq (exit 1 on gaps)")
     check.add_argument("bag", type=Path, help="rosbag2 directory")
@@ -81,3 +89,37 @@ def add_bag_commands(commands: argparse._SubParsersAction) -> None:
                                                     "BAG.damaged")
     repair.add_argument("bag", type=Path, help="rosbag2 directory")
     repair.set_defaults(func=cmd_bag_repair)
+    add_bag_render_command(bag_commands)
+
+
+def cmd_bag_render(args: argparse.Namespace) -> int:
+    """One instant of a bag as a viewer shows it, to PNG (glocal_app/bag_render.py); exit code 1 on a bag that
+    lacks what a viewer needs."""
+    from glocal_app.bag_render import cmd_bag_render as render
+
+    return render(args)
+
+
+def add_bag_render_command(bag_commands: argparse._SubParsersAction) -> None:
+    """``glocal-ros bag render``."""
+    render = bag_commands.add_parser(
+        "render", help="one instant of a bag as a viewer shows it (robot_description, TF, the object marker), "
+                       "to PNG; --sim-out: the sim's own image of it")
+    render.add_argument("bag", type=Path, help="rosbag2 directory")
+    render.add_argument("--out", type=Path, required=True, metavar="PNG", help="the rendered frame")
+    when = render.add_mutually_exclusive_group()
+    when.add_argument("--time", type=float, metavar="SECONDS",
+                      help="the /tf stamp nearest this many seconds after the first /tf stamp "
+                           "(default: the middle /tf stamp)")
+    when.add_argument("--stamp", type=int, metavar="NANOSECONDS", help="exactly this /tf header stamp")
+    render.add_argument("--sim-out", type=Path, metavar="PNG",
+                        help="also the sim's own camera image of the same instant (its bodies set to the recorded "
+                             "joint states and object pose), with the same camera")
+    render.add_argument("--width", type=int, default=640, help="pixels (default 640)")
+    render.add_argument("--height", type=int, default=480, help="pixels (default 480)")
+    render.add_argument("--namespace", metavar="NS",
+                        help="the robot's namespace in the bag (default: the one its viewer topics are recorded "
+                             "under)")
+    render.add_argument("--objects-dir", type=Path, metavar="DIR",
+                        help="with --sim-out: where <TASK>/model.urdf lives (default: the package's assets)")
+    render.set_defaults(func=cmd_bag_render)

@@ -63,11 +63,12 @@ def cmd_evaluate(args: argparse.Namespace) -> int:
 def cmd_launch(args: argparse.Namespace) -> int:
     from glocal_app.launch import launch
 
+    graph = dict(namespace=args.namespace, use_sim_time=args.use_sim_time)
     if args.watchdog is None:
-        return launch(args.strategy, args.preset, args.seed, args.out)
+        return launch(args.strategy, args.preset, args.seed, args.out, **graph)
     if args.watchdog <= 0:
         raise ValueError(f"--watchdog must be positive, got {args.watchdog}")
-    return launch(args.strategy, args.preset, args.seed, args.out, watchdog_sec=args.watchdog)
+    return launch(args.strategy, args.preset, args.seed, args.out, watchdog_sec=args.watchdog, **graph)
 
 
 def cmd_experiment(args: argparse.Namespace) -> int:
@@ -78,7 +79,19 @@ def cmd_experiment(args: argparse.Namespace) -> int:
     if unknown or not strategies:
         raise ValueError(f"unknown strategies {unknown}: expected some of {', '.join(STRATEGY_NAMES)}")
     seeds = [int(seed) for seed in args.seeds.split(",")]
-    return experiment(strategies, seeds, args.preset, args.out)
+    return experiment(strategies, seeds, args.preset, args.out, namespace=args.namespace,
+                      use_sim_time=args.use_sim_time)
+
+
+def add_graph_arguments(parser: argparse.ArgumentParser) -> None:
+    """What ``launch`` and ``experiment`` share about the graph: its namespace and clock."""
+    parser.add_argument("--namespace", default="", metavar="NS",
+                        help="run every node under /NS (e.g. robot1), so that several graphs can share a "
+                             "ROS domain; topics are then recorded as /NS/...")
+    parser.add_argument("--use-sim-time", action="store_true",
+                        help="sim_node and recorder_node on the sim's clock (/clock, /NS/clock under a "
+                             "namespace), which advances by the control period per step; the learner's and the "
+                             "curriculum's timeouts stay wall-clock")
 
 
 def cmd_assets_generate(args: argparse.Namespace) -> int:
@@ -368,8 +381,8 @@ def build_parser() -> argparse.ArgumentParser:
     experience.add_argument("--seed", type=int, default=0, help="of the first episode; episode k: seed + k")
     experience.set_defaults(func=cmd_collect_experience)
 
-    launch = commands.add_parser("launch", help="run the whole graph as processes on an isolated ROS domain; "
-                                 "the same command resumes an interrupted run")
+    launch = commands.add_parser("launch", help="run the whole graph as processes on the ROS_DOMAIN_ID you set, "
+                                 "else on a free one; the same command resumes an interrupted run")
     launch.add_argument("--strategy", default="glocal", choices=STRATEGY_NAMES)
     launch.add_argument("--preset", default="demo", help="a parameter file of assets/params: smoke, demo, paper")
     launch.add_argument("--seed", type=int, default=0)
@@ -377,6 +390,7 @@ def build_parser() -> argparse.ArgumentParser:
                         help="run directory: gets bag/, policies/, curriculum/, logs/ and report/")
     launch.add_argument("--watchdog", type=float, default=None, metavar="SEC",
                         help="stop the graph (resumable) when nothing moves for SEC seconds (default: a minute)")
+    add_graph_arguments(launch)
     launch.set_defaults(func=cmd_launch)
 
     experiment = commands.add_parser("experiment", help="strategies x seeds as separate runs (resumable), "
@@ -385,6 +399,7 @@ def build_parser() -> argparse.ArgumentParser:
     experiment.add_argument("--seeds", default="0,1,2", help="comma-separated")
     experiment.add_argument("--preset", default="smoke", help="a parameter file of assets/params")
     experiment.add_argument("--out", type=Path, required=True, help="gets <strategy>-seed<N>/ per run and report/")
+    add_graph_arguments(experiment)
     experiment.set_defaults(func=cmd_experiment)
     add_report_command(commands)
     add_bag_commands(commands)

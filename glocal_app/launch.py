@@ -1,4 +1,4 @@
-"""``glocal-ros launch`` and ``glocal-ros experiment``: the whole graph as processes on an isolated ROS domain.
+"""``glocal-ros launch`` and ``glocal-ros experiment``: the whole graph as processes, on your ROS domain or a free one.
 
 ``launch`` starts recorder, sim and learner, waits until the recorder
 listens to the episode stream, then starts the curriculum and shows its
@@ -11,7 +11,16 @@ learner's policies and checkpoints (``policies/``), one bag per launch
 (``bag/``, ``bag.1/``, ...), ``logs/`` and ``report/``.
 
 The seed goes to sim, learner and curriculum alike, so that a run with the
-same seed repeats this one.
+same seed repeats this one. Every node gets what ``glocal_app.processes.
+run_parameters`` plans, as ``ros2 launch glocal_ros glocal.launch.py`` gives it.
+
+The domain is the user's ``ROS_DOMAIN_ID`` when set (a viewer already runs
+on it), else a free one of this machine (``glocal_ros.domain``); the launch
+prints which. A namespace (``--namespace robot1``) puts every node, and the
+launcher's own subscriptions and service probe, under ``/robot1``, so that
+several graphs can share a domain; ``--use-sim-time`` gives sim_node and
+recorder_node ``use_sim_time`` (the sim's /clock), while the learner's and the
+curriculum's timeouts stay wall-clock.
 
 A watchdog stops a hung run instead of letting it wait: when a node process
 ends before the curriculum does, or nothing moves for ``watchdog_sec``
@@ -39,17 +48,15 @@ from glocal_interfaces.msg import CurriculumState, EpisodeRecord, TrainingProgre
 from glocal_interfaces.srv import ListPolicies
 from rclpy.signals import SignalHandlerOptions
 
-from glocal_app.processes import NodeProcess, isolated_environment
-from glocal_ros.domain import reserve_domain_id
-from glocal_ros.paths import assets_dir
+from glocal_app.processes import (NodeProcess, claim_run_dir, isolated_environment, namespace_arguments,
+                                   new_bag_path, normalize_namespace, preset_file, run_parameters)
+from glocal_ros.domain import choose_domain_id
 from glocal_ros.recording import message_counts
-from glocal_ros.topics import EPISODES_TOPIC
 from node_common import names, qos
 from node_common.runner import configure_discovery
 
 STATUS_NAMES = {value: name.removeprefix("STATUS_").lower() for name, value in vars(CurriculumState).items()
                 if name.startswith("STATUS_")}
-RUN_FILE = "run.json"
 #: Seconds without an episode, a progress report or a curriculum state before a run counts as hung.
 #: Longer than the curriculum's own re-send of an unanswered goal (ros_learner.GOAL_RESPONSE_TIMEOUT_SEC).
 DEFAULT_WATCHDOG_SEC = 60.0
@@ -107,23 +114,6 @@ class Watchdog:
         return text
 
 
-def preset_file(preset: str) -> Path:
-    path = assets_dir() / "params" / f"{preset}.yaml"
-    if not path.is_file():
-        known = sorted(p.stem for p in path.parent.glob("*.yaml"))
-        raise ValueError(f"unknown preset {preset!r}: expected one of {', '.join(known)}")
-    return path
-
-
-def new_bag_path(run_dir: Path) -> Path:
-    bag = run_dir / "bag"
-    index = 1
-    while bag.exists():
-        bag = run_dir / f"bag.{index}"
-        index += 1
-    return bag
-
-
 def describe(state: CurriculumState) -> str:
     text = f"[{state.strategy}] iteration {state.iteration}, {STATUS_NAMES.get(state.status, state.status)}"
     if state.clusters:
@@ -131,20 +121,6 @@ def describe(state: CurriculumState) -> str:
     if state.global_task:
         text += f", global task {state.global_task}, local tasks {','.join(state.local_tasks) or '-'}"
     return text + f", learned {len(state.learned_tasks)}/{len(state.learned_tasks) + len(state.remaining_tasks)}"
-
-
-def claim_run_dir(run_dir: Path, strategy: str, preset: str, seed: int) -> bool:
-    """Record what RUN_DIR runs; True when it resumes an earlier launch. Another run's directory is refused."""
-    path = run_dir / RUN_FILE
-    wanted = {"strategy": strategy, "preset": preset, "seed": seed}
-    if path.is_file():
-        found = json.loads(path.read_text())
-        if found != wanted:
-            raise ValueError(f"{run_dir} holds the run {found}, not {wanted}: choose another --out")
-        return True
-    run_dir.mkdir(parents=True, exist_ok=True)
-    path.write_text(json.dumps(wanted) + "\n")
-    return False
 
 
 def run_finished(run_dir: Path) -> bool:
@@ -218,15 +194,27 @@ def check_graph(node, watchdog: Watchdog, progress: Progress, started: Sequence[
 
 
 def launch(strategy: str, preset: str, seed: int, run_dir: Path, startup_timeout: float = 120.0,
-           report: bool = True, watchdog_sec: float = DEFAULT_WATCHDOG_SEC) -> int:
+           report: bool = True, watchdog_sec: float = DEFAULT_WATCHDOG_SEC, namespace: str = "",
+           use_sim_time: bool = False) -> int:
+    """Run (or resume) one run in ``run_dir``; the curriculum's exit code, 130 on Ctrl-C, ``EXIT_STALLED``.
+
+    Bad input (an unknown preset, an invalid namespace or ROS_DOMAIN_ID, another run's directory)
+    raises ``ValueError`` before anything starts.
+    """
     params_file = preset_file(preset)
-    resumed = claim_run_dir(run_dir, strategy, preset, seed)
+    namespace = normalize_namespace(namespace)
+    domain = choose_domain_id()
+    try:
+        resumed = claim_run_dir(run_dir, strategy, preset, seed)
+    except ValueError:
+        domain.close()
+        raise
     logs = run_dir / "logs"
     bag = new_bag_path(run_dir)
-    domain_id, domain_lock = reserve_domain_id()
-    env = isolated_environment(domain_id, logs)
-    print(f"{'resuming' if resumed else 'launching'} preset {preset}, strategy {strategy}, seed {seed} "
-          f"on ROS_DOMAIN_ID {domain_id}; logs in {logs}", flush=True)
+    env = isolated_environment(domain.domain_id, logs, keep_discovery_range=domain.from_environment)
+    where = f", namespace {namespace}" if namespace else ""
+    print(f"{'resuming' if resumed else 'launching'} preset {preset}, strategy {strategy}, seed {seed}{where} "
+          f"on {domain.describe()}; logs in {logs}", flush=True)
 
     configure_discovery()  # the launcher's own participant on loopback too
     # SIGINT is the launcher's to handle (KeyboardInterrupt below: stop the graph in order). rclpy's
@@ -234,10 +222,12 @@ def launch(strategy: str, preset: str, seed: int, run_dir: Path, startup_timeout
     # ExternalShutdownException instead (seen under load); SIGTERM stops the graph as Ctrl-C does.
     # Set, not inherited: a launcher started as a script's background job inherits SIGINT ignored
     # (POSIX shells do that to async commands), and Python then leaves it so: Ctrl-C did nothing.
-    rclpy.init(domain_id=domain_id, signal_handler_options=SignalHandlerOptions.NO)
+    rclpy.init(domain_id=domain.domain_id, signal_handler_options=SignalHandlerOptions.NO)
     signal.signal(signal.SIGINT, signal.default_int_handler)
     signal.signal(signal.SIGTERM, signal.default_int_handler)
-    node = rclpy.create_node("glocal_ros_launch")
+    # In the graph's namespace: the names below are relative (node_common.names), so the progress,
+    # the watchdog and the learner probe hear this graph's nodes and no other's.
+    node = rclpy.create_node("glocal_ros_launch", namespace=namespace or None)
     progress = Progress()
     watchdog = Watchdog(watchdog_sec, startup_timeout)
 
@@ -251,24 +241,27 @@ def launch(strategy: str, preset: str, seed: int, run_dir: Path, startup_timeout
     # Raw: the watchdog only needs to know that an episode came, not what it holds.
     node.create_subscription(EpisodeRecord, names.EPISODES, heard("an episode"), qos.EPISODES, raw=True)
     started: list[NodeProcess] = []
+    plan = run_parameters(strategy, seed, run_dir, bag, use_sim_time)
 
-    def start(name: str, **params) -> NodeProcess:
-        process = NodeProcess(name, logs, params, params_file, env)
+    def start(name: str) -> NodeProcess:
+        process = NodeProcess(name, logs, plan[name], params_file, env, extra_args=namespace_arguments(namespace))
         started.append(process)
         return process
 
     exit_code = 1
     try:
-        start("recorder_node", output=str(bag))
-        start("sim_node", seed=seed)
-        start("learner_node", seed=seed, policy_dir=str(run_dir / "policies"))
+        start("recorder_node")
+        start("sim_node")
+        start("learner_node")
         deadline = time.monotonic() + startup_timeout
-        while node.count_subscribers(EPISODES_TOPIC) < 1 or node.count_publishers(EPISODES_TOPIC) < 1:
+        # Before the curriculum starts: the recorder listens to the sim's episode stream, so that
+        # the bag holds every episode from seq 0.
+        while node.count_subscribers(names.EPISODES) < 1 or node.count_publishers(names.EPISODES) < 1:
             rclpy.spin_once(node, timeout_sec=0.1)
             failed = [p for p in started if not p.running]
             if failed or time.monotonic() > deadline:
                 raise RuntimeError(f"{(failed or started)[0].node} did not start: see {(failed or started)[0].log_path}")
-        curriculum = start("curriculum_node", strategy=strategy, seed=seed, state_dir=str(run_dir / "curriculum"))
+        curriculum = start("curriculum_node")
         watchdog.started = time.monotonic()
         while curriculum.running:
             rclpy.spin_once(node, timeout_sec=0.2)
@@ -295,7 +288,7 @@ def launch(strategy: str, preset: str, seed: int, run_dir: Path, startup_timeout
                 exit_code = exit_code or code
         node.destroy_node()
         rclpy.try_shutdown()
-        domain_lock.close()
+        domain.close()
     if (bag / "metadata.yaml").is_file():
         counts = ", ".join(f"{topic} {count}" for topic, count in message_counts(bag).items() if count)
         print(f"bag: {bag} ({counts})")
@@ -317,8 +310,13 @@ def write_run_report(run_dirs: Sequence[Path], out_dir: Path) -> None:
     print(f"report: {path}")
 
 
-def experiment(strategies: Sequence[str], seeds: Sequence[int], preset: str, out: Path) -> int:
-    """Every strategy x seed as its own run under ``out``; finished runs are kept, others (re)launched."""
+def experiment(strategies: Sequence[str], seeds: Sequence[int], preset: str, out: Path, namespace: str = "",
+               use_sim_time: bool = False) -> int:
+    """Every strategy x seed as its own run under ``out``; finished runs are kept, others (re)launched.
+
+    The runs go one after another, each with ``launch``'s namespace, sim time and domain choice.
+    """
+    normalize_namespace(namespace)  # refused before the first run, not after it
     run_dirs, failed = [], []
     for strategy in strategies:
         for seed in seeds:
@@ -327,7 +325,8 @@ def experiment(strategies: Sequence[str], seeds: Sequence[int], preset: str, out
             if run_finished(run_dir):
                 print(f"{run_dir.name}: finished before")
                 continue
-            code = launch(strategy, preset, seed, run_dir, report=False)
+            code = launch(strategy, preset, seed, run_dir, report=False, namespace=namespace,
+                          use_sim_time=use_sim_time)
             if code == 130:
                 return code
             if code:

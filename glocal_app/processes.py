@@ -1,14 +1,138 @@
-"""Nodes as child processes: started as ``glocal-ros run NODE``, logged to a file, stopped cleanly."""
+"""A run's nodes: what each one gets (the plan), and nodes as child processes.
+
+The plan is ROS-free and is the one source of both ways to start a run:
+``glocal-ros launch`` (``glocal_app.launch``) and ``ros2 launch glocal_ros
+glocal.launch.py`` (``launch/glocal.launch.py``) give every node the same
+parameters from it: the preset's parameter file, the seed, the run directory's
+``bag/``, ``policies/`` and ``curriculum/``, the namespace and, for the nodes in
+``SIM_TIME_NODES`` only, ``use_sim_time``.
+
+A process is started as ``glocal-ros run NODE``, logged to a file and stopped
+cleanly.
+
+Standard library only at import: the launch file runs in the ``ros2``
+command's own interpreter, which need not have the project's Python
+dependencies (importing ``glocal_ros`` loads gymnasium).
+"""
 
 from __future__ import annotations
 
+import json
 import os
+import re
 import signal
 import subprocess
 import sys
 import time
 from pathlib import Path
 from typing import Mapping, Sequence
+
+#: The nodes of a run, in the order they start (they stop in the reverse order).
+RUN_NODES = ("recorder_node", "sim_node", "learner_node", "curriculum_node")
+#: The nodes that follow the sim's /clock when the run asks for sim time: the sim stamps what it
+#: publishes with it, the recorder records on it. The learner's and the curriculum's timeouts (a
+#: service that does not answer, a goal that takes too long) stay wall-clock on purpose.
+SIM_TIME_NODES = ("sim_node", "recorder_node")
+#: What records which run a run directory holds (``claim_run_dir``).
+RUN_FILE = "run.json"
+_NAMESPACE_TOKEN = re.compile(r"[A-Za-z_][A-Za-z0-9_]*")
+
+
+def preset_file(preset: str, params_dir: Path | None = None) -> Path:
+    """The parameter file of a preset (``assets/params/<preset>.yaml`` unless ``params_dir`` says where)."""
+    if params_dir is None:
+        from glocal_ros.paths import assets_dir
+
+        params_dir = assets_dir() / "params"
+    folder = params_dir
+    path = folder / f"{preset}.yaml"
+    if not path.is_file():
+        known = sorted(p.stem for p in folder.glob("*.yaml"))
+        raise ValueError(f"unknown preset {preset!r}: expected one of {', '.join(known)}")
+    return path
+
+
+def normalize_namespace(namespace: str) -> str:
+    """``""`` (the root) or an absolute namespace, ``/robot1``; ``ValueError`` for one ROS would refuse.
+
+    ``robot1``, ``/robot1`` and ``robot1/`` are the same namespace (a run's namespace is absolute).
+    """
+    stripped = namespace.strip().strip("/")
+    if not stripped:
+        return ""
+    tokens = stripped.split("/")
+    if not all(_NAMESPACE_TOKEN.fullmatch(token) for token in tokens):
+        raise ValueError(f"invalid namespace {namespace!r}: names of letters, digits and underscores, not starting "
+                         f"with a digit, separated by single slashes (e.g. robot1 or lab/robot1)")
+    return "/" + "/".join(tokens)
+
+
+def namespace_remappings(namespace: str) -> list[tuple[str, str]]:
+    """Remappings that a node in ``namespace`` ("" for none) needs beside ``__ns`` itself.
+
+    rclpy's time source subscribes to the absolute ``/clock``, while a namespaced sim publishes its
+    clock in its namespace (``/robot1/clock``): remapped to the relative ``clock``, every node of a
+    namespaced graph hears its own sim's clock, not another graph's.
+    """
+    return [("/clock", "clock")] if namespace else []
+
+
+def namespace_arguments(namespace: str) -> list[str]:
+    """``--ros-args`` text for ``namespace`` (normalized; "" for none): what ``ros2 launch`` does for a Node."""
+    if not namespace:
+        return []
+    arguments = ["-r", f"__ns:={namespace}"]
+    for source, target in namespace_remappings(namespace):
+        arguments += ["-r", f"{source}:={target}"]
+    return arguments
+
+
+def default_run_dir(strategy: str, seed: int) -> Path:
+    """``$ROS_HOME/glocal_ros/runs/<strategy>-seed<seed>``: a ``ros2 launch`` run given no ``out``.
+
+    ROS_HOME as ``glocal_ros.paths.ros_home`` reads it (not imported: see the module's docstring).
+    """
+    return Path(os.environ.get("ROS_HOME", Path.home() / ".ros")) / "glocal_ros" / "runs" / f"{strategy}-seed{seed}"
+
+
+def new_bag_path(run_dir: Path) -> Path:
+    """``<run_dir>/bag``, or ``bag.1``, ``bag.2``, ... after earlier launches: one bag per launch."""
+    bag = run_dir / "bag"
+    index = 1
+    while bag.exists():
+        bag = run_dir / f"bag.{index}"
+        index += 1
+    return bag
+
+
+def claim_run_dir(run_dir: Path, strategy: str, preset: str, seed: int) -> bool:
+    """Record what RUN_DIR runs; True when it resumes an earlier launch. Another run's directory is refused."""
+    path = run_dir / RUN_FILE
+    wanted = {"strategy": strategy, "preset": preset, "seed": seed}
+    if path.is_file():
+        found = json.loads(path.read_text())
+        if found != wanted:
+            raise ValueError(f"{run_dir} holds the run {found}, not {wanted}: choose another run directory (--out)")
+        return True
+    run_dir.mkdir(parents=True, exist_ok=True)
+    path.write_text(json.dumps(wanted) + "\n")
+    return False
+
+
+def run_parameters(strategy: str, seed: int, run_dir: Path, bag: Path,
+                   use_sim_time: bool = False) -> dict[str, dict[str, object]]:
+    """What each node of a run gets on top of its preset, keyed by node, in ``RUN_NODES`` order.
+
+    ``use_sim_time`` is given to the nodes of ``SIM_TIME_NODES`` only, and only when on: a node
+    without it keeps whatever its preset says.
+    """
+    sim_time = {"use_sim_time": True} if use_sim_time else {}
+    return {
+        "recorder_node": {"output": str(bag), **sim_time},
+        "sim_node": {"seed": seed, **sim_time},
+        "learner_node": {"seed": seed, "policy_dir": str(run_dir / "policies")},
+        "curriculum_node": {"strategy": strategy, "seed": seed, "state_dir": str(run_dir / "curriculum")},
+    }
 
 
 def ros_param_text(value) -> str:
@@ -69,10 +193,17 @@ class NodeProcess:
         return self.process.returncode
 
 
-def isolated_environment(domain_id: int, log_dir: Path) -> dict[str, str]:
-    """This process's environment on ``domain_id``, discovery on loopback, ROS logs in ``log_dir``."""
+def isolated_environment(domain_id: int, log_dir: Path, keep_discovery_range: bool = False) -> dict[str, str]:
+    """This process's environment on ``domain_id``, discovery on loopback, ROS logs in ``log_dir``.
+
+    A domain chosen free on this machine is only free here, so discovery is forced onto loopback.
+    ``keep_discovery_range``: the user chose the domain, and a ``ROS_AUTOMATIC_DISCOVERY_RANGE`` of
+    theirs (SUBNET, to watch from another host) is kept; unset, the nodes take LOCALHOST
+    (``node_common.runner.configure_discovery``).
+    """
     env = dict(os.environ)
-    env.update(ROS_DOMAIN_ID=str(domain_id), ROS_AUTOMATIC_DISCOVERY_RANGE="LOCALHOST",
-               ROS_LOG_DIR=str(log_dir), PYTHONUNBUFFERED="1")
+    env.update(ROS_DOMAIN_ID=str(domain_id), ROS_LOG_DIR=str(log_dir), PYTHONUNBUFFERED="1")
+    if not keep_discovery_range:
+        env["ROS_AUTOMATIC_DISCOVERY_RANGE"] = "LOCALHOST"
     env.setdefault("AMENT_PREFIX_PATH", sys.prefix)
     return env

@@ -4,10 +4,11 @@ Such a bag has MCAP files without summary and footer, and no metadata.yaml
 (rosbags writes both on close), so no reader accepts it. Every record that
 reached the disk whole is still there: ``repair_bag`` reads the MCAP files
 record by record (``mcap``'s StreamReader, which needs no summary), drops the
-truncated tail, writes what it recovered through rosbags' Writer as
-``BagWriter`` does (same schemas, channels with their offered QoS profiles,
-zstd chunks, metadata.yaml v9) into a fresh directory, then swaps it in and
-keeps the damaged original next to it as ``BAG.damaged``: nothing is deleted.
+truncated tail, writes what it recovered through ``Rosbag2Writer`` as
+``BagWriter`` does (same schemas, channels with their offered QoS profiles
+and type hashes, each message's log and publish times, zstd chunks,
+metadata.yaml v9) into a fresh directory, then swaps it in and keeps the
+damaged original next to it as ``BAG.damaged``: nothing is deleted.
 
 What is lost: the recorder's writer keeps the chunk being filled in memory
 until its next flush (every few seconds, or 1 MiB of messages), so the
@@ -27,12 +28,12 @@ from typing import BinaryIO, Iterator
 from mcap.records import Channel, Chunk, Message, Schema
 from mcap.stream_reader import StreamReader, breakup_chunk
 from rosbags.interfaces import Connection
-from rosbags.rosbag2 import CompressionFormat, CompressionMode, Reader, ReaderError, StoragePlugin, Writer
+from rosbags.rosbag2 import Reader, ReaderError
 from rosbags.rosbag2.metadata import parse_qos
 from ruamel.yaml import YAML, YAMLError
 from rosbags.typesys import Stores, get_types_from_idl, get_types_from_msg, get_typestore
 
-from glocal_ros.recording import RESERVE_FILE
+from glocal_ros.recording import RESERVE_FILE, Rosbag2Writer
 
 DAMAGED_SUFFIX = ".damaged"
 _IDL_SEPARATOR = "=" * 80 + "\n"
@@ -55,7 +56,7 @@ class RepairResult:
 class _Recovery:
     """State of one repair: the output writer and the connections made so far."""
 
-    writer: Writer
+    writer: Rosbag2Writer
     connections: dict[tuple[str, str, str, str], Connection] = field(default_factory=dict)
     counts: dict[str, int] = field(default_factory=dict)
     dropped_chunks: int = 0
@@ -149,7 +150,7 @@ def _recover_file(path: Path, recovery: _Recovery) -> None:
                 if connection is None:
                     recovery.skipped_messages += 1
                     continue
-                recovery.writer.write(connection, record.log_time, record.data)
+                recovery.writer.write(connection, record.log_time, record.data, record.publish_time)
                 recovery.counts[connection.topic] += 1
 
 
@@ -164,7 +165,8 @@ def _connection(channel: Channel, schema: Schema | None, recovery: _Recovery) ->
             channel.topic,
             schema.name,
             msgdef=schema.data.decode(),
-            rihs01=_rihs01(schema),
+            # The hash the recorder wrote (rosbag2's MCAP plugin writes it too), else computed from the schema.
+            rihs01=channel.metadata.get("topic_type_hash") or _rihs01(schema),
             serialization_format=channel.message_encoding,
             offered_qos_profiles=parse_qos(qos_text),
         )
@@ -204,8 +206,7 @@ def repair_bag(bag: Path) -> RepairResult:
     # bag's name.
     (bag / RESERVE_FILE).unlink(missing_ok=True)
     workdir = Path(tempfile.mkdtemp(prefix=f".{bag.name}.repair-", dir=bag.parent))
-    writer = Writer(workdir / bag.name, version=9, storage_plugin=StoragePlugin.MCAP)
-    writer.set_compression(CompressionMode.STORAGE, CompressionFormat.ZSTD)
+    writer = Rosbag2Writer(workdir / bag.name)
     recovery = _Recovery(writer)
     try:
         writer.open()

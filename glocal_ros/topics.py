@@ -39,8 +39,9 @@ VIEWER_QOS = QosSpec(reliable=True, transient_local=False, depth=10)
 #: object marker (as robot_state_publisher offers them: reliable, transient local, depth 1).
 DESCRIPTION_QOS = QosSpec(reliable=True, transient_local=True, depth=1)
 #: /clock: one message per lockstep step. Reliable is accepted by rclpy's own best-effort
-#: time-source subscription and by reliable ones.
-CLOCK_QOS = QosSpec(reliable=True, transient_local=False, depth=10)
+#: time-source subscription and by reliable ones; the deeper queue lets a recorder that falls
+#: a second behind still get every tick.
+CLOCK_QOS = QosSpec(reliable=True, transient_local=False, depth=100)
 
 
 @dataclass(frozen=True)

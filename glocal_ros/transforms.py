@@ -74,31 +74,6 @@ def rpy_quaternion(roll: float, pitch: float, yaw: float) -> tuple[float, float,
     )
 
 
-def poses_in(root: str, edges: dict[str, tuple[str, Transform]]) -> dict[str, Transform]:
-    """Each frame's pose in ``root``, chaining ``edges`` (child -> (parent, the child's frame in the parent's)).
-
-    Frames with no chain of edges up to ``root`` are left out: a viewer cannot
-    place them either.
-    """
-    poses = {root: IDENTITY}
-
-    def resolve(frame: str, seen: tuple[str, ...]) -> Transform | None:
-        if frame in poses:
-            return poses[frame]
-        if frame not in edges or frame in seen:
-            return None
-        parent, transform = edges[frame]
-        parent_pose = resolve(parent, (*seen, frame))
-        if parent_pose is None:
-            return None
-        poses[frame] = parent_pose * transform
-        return poses[frame]
-
-    for frame in edges:
-        resolve(frame, ())
-    return poses
-
-
 class FrameLookupError(LookupError):
     """A frame is not connected to the root of a transform tree; the message names where the chain breaks."""
 

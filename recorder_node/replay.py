@@ -2,14 +2,16 @@
 
 ``replay(bag)`` republishes the recorded messages raw (the CDR bytes as
 recorded: nothing is decoded or re-encoded) on the topic names as recorded,
-which are absolute, with the recorded spacing divided by ``rate``. Each
-publisher offers the QoS the recorded publishers offered (from the bag's
-``offered_qos_profiles``, else from ``glocal_ros.topics.GRAPH_TOPICS``), so late-joining
-viewers still get the latched curriculum state.
+which are absolute (under the recorder's namespace, if it had one), with the
+recorded spacing divided by ``rate``. Each publisher offers the QoS the
+recorded publishers offered (from the bag's ``offered_qos_profiles``, else
+from the table's entry for the topic, ``glocal_ros.recording.table_topic``),
+so late-joining viewers still get the latched curriculum state.
 
 ``replay(bag, episode=SEQ)`` plays one EpisodeRecord back for a viewer
 instead: its ``joint_positions`` rows as sensor_msgs/JointState on
-``/joint_states``, one per env step at the env's control period (physics
+``joint_states`` of the namespace the episode was recorded in (``/joint_states``
+for the root one), one per env step at the env's control period (physics
 substeps x physics timestep of ``GraspEnvConfig``: 10 x 1/240 s), so that
 robot_state_publisher + RViz show the arm as it moved in the sim.
 """
@@ -30,13 +32,14 @@ from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPo
 from rclpy.signals import SignalHandlerOptions
 from rosbags.interfaces import Qos, QosDurability, QosHistory, QosReliability
 
-from glocal_ros.recording import episode_seq_from_cdr, graph_typestore, open_bag
+from glocal_ros.recording import (
+    episode_seq_from_cdr, episode_topics, graph_typestore, in_namespace, open_bag, table_topic, topic_namespace,
+)
 from glocal_ros.spaces import CONTROL_PERIOD
-from glocal_ros.topics import EPISODES_TOPIC, GRAPH_TOPICS, JOINT_STATES
+from glocal_ros.topics import EPISODES, EPISODES_TOPIC, JOINT_STATES
 from node_common.runner import SHUTDOWN_POLL_SEC, configure_discovery
 from recorder_node.recorder_node import message_class
 
-JOINT_STATES_TOPIC = JOINT_STATES.name
 #: Longest wait for subscribers before the first message (see ReplayNode.wait_for_subscribers):
 #: discovery between two processes on loopback takes up to about 3 s here.
 DEFAULT_WAIT_SEC = 5.0
@@ -72,9 +75,11 @@ def publisher_qos(topic: str, recorded: Sequence[Qos]) -> QoSProfile:
     The weakest of the recorded offers, as rosbag2's player adapts them:
     reliable only if every recorded publisher was, transient local only if
     every one was, so that a subscriber that matched all of them matches the
-    replay too. Without recorded offers, the graph's own (``GRAPH_TOPICS``).
+    replay too. Without recorded offers, the table's for the topic, under
+    whatever namespace it was recorded. Offers seen in the graph carry no
+    depth (0): the table's depth then, else rclpy's default of 10.
     """
-    spec = next((spec for spec in GRAPH_TOPICS if spec.name == topic), None)
+    spec = table_topic(topic)
     known = [qos for qos in recorded if qos.reliability != QosReliability.UNKNOWN]
     if known:
         reliable = all(qos.reliability == QosReliability.RELIABLE for qos in known)
@@ -138,22 +143,28 @@ class EpisodeSource:
     def __init__(self, bag: Path, seq: int, step_period: float, start_offset: float = 0.0):
         self.period_ns = round(step_period * 1e9)
         self.first_row = int(np.ceil(start_offset / step_period - 1e-9))
-        self.names, self.rows = self._find(Path(bag), seq)
+        found = episode_topics(Path(bag))
+        if len(found) > 1:
+            raise ValueError(f"{bag} has episodes of several sim nodes ({', '.join(found)}): "
+                             "seq numbers are per node, so --episode cannot tell which")
+        self.episodes_topic = found[0] if found else EPISODES_TOPIC
+        self.joint_states_topic = in_namespace(topic_namespace(self.episodes_topic, EPISODES) or "/", JOINT_STATES)
+        self.names, self.rows = self._find(Path(bag), self.episodes_topic, seq)
         if self.first_row >= len(self.rows):
             raise ValueError(f"--start-offset {start_offset} s is past the end of episode {seq} "
                              f"({len(self.rows)} states, {len(self.rows) * step_period:.2f} s)")
         with open_bag(Path(bag)) as reader:
-            recorded = [qos for c in reader.connections if c.topic == JOINT_STATES_TOPIC
+            recorded = [qos for c in reader.connections if c.topic == self.joint_states_topic
                         for qos in c.ext.offered_qos_profiles]
-        self.topics = [ReplayTopic(JOINT_STATES_TOPIC, "sensor_msgs/msg/JointState",
-                                   publisher_qos(JOINT_STATES_TOPIC, recorded))]
+        self.topics = [ReplayTopic(self.joint_states_topic, "sensor_msgs/msg/JointState",
+                                   publisher_qos(self.joint_states_topic, recorded))]
 
     @staticmethod
-    def _find(bag: Path, seq: int) -> tuple[list[str], np.ndarray]:
+    def _find(bag: Path, topic: str, seq: int) -> tuple[list[str], np.ndarray]:
         typestore = graph_typestore()
         record = None
         with open_bag(bag) as reader:
-            connections = [connection for connection in reader.connections if connection.topic == EPISODES_TOPIC]
+            connections = [connection for connection in reader.connections if connection.topic == topic]
             # An empty selection would mean every topic to rosbags.
             messages = reader.messages(connections=connections) if connections else iter(())
             for connection, _, data in messages:
@@ -165,7 +176,7 @@ class EpisodeSource:
                         break
                     record = None
         if record is None:
-            raise ValueError(f"{bag} has no episode with seq {seq} on {EPISODES_TOPIC}")
+            raise ValueError(f"{bag} has no episode with seq {seq} on {topic}")
         names = list(record.joint_names)
         positions = np.asarray(record.joint_positions, dtype=np.float64)
         if not names or positions.size % len(names) or not positions.size:
@@ -178,7 +189,7 @@ class EpisodeSource:
 
         for index in range(self.first_row, len(self.rows)):
             message = JointState(name=self.names, position=self.rows[index].tolist())
-            yield (index - self.first_row) * self.period_ns, JOINT_STATES_TOPIC, message
+            yield (index - self.first_row) * self.period_ns, self.joint_states_topic, message
 
 
 class ReplayNode(Node):
@@ -279,7 +290,7 @@ def replay(
     source: ReplaySource
     if episode is not None:
         if topics:
-            raise ValueError("--episode replays /joint_states only: --topics does not go with it")
+            raise ValueError("--episode replays joint_states only: --topics does not go with it")
         period = default_step_period() if step_period is None else step_period
         if not period > 0:
             raise ValueError(f"--step-period must be positive, got {period}")

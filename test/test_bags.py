@@ -15,6 +15,8 @@ from glocal_interfaces.msg import CurriculumState, EpisodeRecord, EvaluationResu
 from rclpy.duration import Duration
 from rclpy.serialization import serialize_message
 from rosbags.highlevel import AnyReader
+from rosbags.interfaces import QosReliability
+from rosbags.rosbag2.metadata import parse_qos
 from sensor_msgs.msg import JointState
 
 from conftest import REPO, wait_until
@@ -124,6 +126,21 @@ def test_a_killed_recorder_loses_nothing_before_its_last_flush(start_node, ros_n
     assert (check.count, check.first, check.last) == (5, 0, 4) and check.ok, check.summary()
 
 
+def channel_metadata(mcap: Path) -> dict[str, dict[str, str]]:
+    """Each channel's metadata by topic, from the channel records of an MCAP file, closed or not."""
+    from mcap.records import Channel
+    from mcap.stream_reader import StreamReader
+
+    found = {}
+    try:
+        for record in StreamReader(io.BytesIO(mcap.read_bytes()), emit_chunks=False).records:
+            if isinstance(record, Channel):
+                found[record.topic] = dict(record.metadata)
+    except Exception:  # noqa: BLE001 - the end of what was written
+        pass
+    return found
+
+
 def test_repair_recovers_what_a_killed_recorder_wrote(start_node, ros_node, tmp_path):
     bag = tmp_path / "bag"
     recorder = start_node("recorder_node", output=str(bag), flush_interval_sec=3600.0)
@@ -152,7 +169,11 @@ def test_repair_recovers_what_a_killed_recorder_wrote(start_node, ros_node, tmp_
     assert "recovered" in result.stdout and "bag.damaged" in result.stdout
     with AnyReader([bag], default_typestore=graph_typestore()) as reader:
         connection = next(c for c in reader.connections if c.topic == "/glocal/episodes")
-        assert connection.ext.offered_qos_profiles[0].depth == 1000  # the recorded QoS went along
+        # The recorded QoS went along: what the test's publisher offered (reliable; discovery reports no depth).
+        offered = connection.ext.offered_qos_profiles
+        assert offered == parse_qos(channel_metadata(tmp_path / "bag.damaged" / "bag.mcap")["/glocal/episodes"]
+                                    ["offered_qos_profiles"])
+        assert [qos.reliability for qos in offered] == [QosReliability.RELIABLE], offered
         records = [reader.deserialize(raw, c.msgtype) for c, _, raw in reader.messages(connections=[connection])]
     seqs = [record.seq for record in records]
     assert 6 <= len(seqs) < len(published) and seqs == list(range(len(seqs)))
@@ -291,7 +312,7 @@ def test_replay_keeps_order_and_timing_and_filters_topics(ros_node, tmp_path):
 
 
 def test_replay_of_an_episode_publishes_its_joint_states(ros_node, tmp_path):
-    """joint_states is best effort: what the replay sends before this reader has matched it is lost
+    """joint_states is volatile: what the replay sends before this reader has matched it is lost
     (on a loaded machine that can outlast the replay's settle time). Looping the episode until one
     whole pass has arrived checks the content without betting on discovery's timing."""
     bag = write_bag(tmp_path / "bag", [("/glocal/episodes", 1.0 * s, episode(s, states=4 + s)) for s in range(3)])

@@ -1,4 +1,11 @@
-"""`glocal-ros launch` and `experiment` on the smoke preset: runs, records, reports, resumes."""
+"""`glocal-ros launch` and `experiment` on the smoke preset: runs, records, reports, resumes.
+
+`glocal-ros launch` honours a ROS_DOMAIN_ID set in its environment, and the
+suite sets one for its own nodes (conftest): the launches here run without
+it (``graph_env``), so that each takes a free domain of its own and never
+meets a node another test started. test_namespace.py runs one on a domain
+given explicitly.
+"""
 
 import os
 import signal
@@ -6,17 +13,26 @@ import subprocess
 import sys
 import time
 
+import pytest
 from rosbags.highlevel import AnyReader
 
 from conftest import REPO
+from glocal_ros.domain import choose_domain_id, domain_id_from_environment, hold_domain_id, reserve_domain_id
 from glocal_ros.recording import episode_sequence, graph_typestore
 
 CLI = [sys.executable, "-m", "glocal_app.cli"]
 
 
-def launch(run_dir, *args, timeout=300):
+def graph_env(**variables: str) -> dict[str, str]:
+    """The suite's environment without its ROS_DOMAIN_ID (see the docstring), plus ``variables``."""
+    env = {name: value for name, value in os.environ.items() if name != "ROS_DOMAIN_ID"}
+    env.update(variables)
+    return env
+
+
+def launch(run_dir, *args, timeout=300, env=None):
     return subprocess.run([*CLI, "launch", "--preset", "smoke", "--out", str(run_dir), *args],
-                          capture_output=True, text=True, timeout=timeout, cwd=REPO)
+                          capture_output=True, text=True, timeout=timeout, cwd=REPO, env=env or graph_env())
 
 
 def read(bag, topic):
@@ -29,6 +45,7 @@ def test_smoke_launch_records_the_run_and_reports_it(tmp_path):
     result = launch(run_dir, "--seed", "1")
     assert result.returncode == 0, result.stdout + result.stderr
     assert "global task" in result.stdout and f"report: {run_dir / 'report' / 'report.md'}" in result.stdout
+    assert "(a free one; set ROS_DOMAIN_ID to choose)" in result.stdout
 
     states = read(run_dir / "bag", "/glocal/curriculum_state")
     assert states[-1].status == 5 and states[-1].run_id == "glocal-seed1"
@@ -49,15 +66,40 @@ def test_smoke_launch_records_the_run_and_reports_it(tmp_path):
     assert refused.returncode == 2 and "holds the run" in refused.stderr
 
 
+def sim_stamps(bag) -> dict[str, list[int]]:
+    """The stamps sim_node gave its messages (header stamps; /clock's value), per topic, in order."""
+    def nanoseconds(stamp) -> int:
+        return stamp.sec * 10**9 + stamp.nanosec
+
+    return {
+        "/clock": [nanoseconds(m.clock) for m in read(bag, "/clock")],
+        "/glocal/episodes": [nanoseconds(m.header.stamp) for m in read(bag, "/glocal/episodes")],
+        "/joint_states": [nanoseconds(m.header.stamp) for m in read(bag, "/joint_states")],
+        "/tf": [nanoseconds(m.transforms[0].header.stamp) for m in read(bag, "/tf")],
+    }
+
+
 def test_the_same_seed_repeats_the_run_answer_for_answer(tmp_path):
-    """Seeded sim episodes, learner and curriculum: two runs' journals (every score, every episode) agree."""
-    journals = []
+    """Seeded sim episodes, learner and curriculum: two runs' journals (every score, every episode) agree;
+    on sim time, so do the stamps of everything the sim sent."""
+    journals, stamps = [], []
     for name in ("first", "second"):
-        result = launch(tmp_path / name, "--seed", "5")
+        result = launch(tmp_path / name, "--seed", "5", "--use-sim-time")
         assert result.returncode == 0, result.stdout + result.stderr
         journals.append((tmp_path / name / "curriculum" / "journal.jsonl").read_text())
+        stamps.append(sim_stamps(tmp_path / name / "bag"))
     assert journals[0].count('"call": "train"') > 0
     assert journals[0] == journals[1]
+    first, second = stamps
+    assert all(first.values()) and first["/clock"][-1] > 0
+    for topic in ("/clock", "/glocal/episodes"):  # reliable with deep queues: every message is in the bag
+        assert first[topic] == second[topic], topic
+    # Throttled viewer streams keep a queue of 10: a recorder that falls behind on a loaded machine
+    # may miss one. What both bags hold must be the same instants, on the sim clock.
+    for topic in ("/joint_states", "/tf"):
+        common = set(first[topic]) & set(second[topic])
+        assert len(common) >= 0.95 * max(len(first[topic]), len(second[topic])), topic
+        assert set(first[topic]) <= set(first["/clock"]), topic
 
 
 def test_ctrl_c_leaves_a_valid_bag_and_the_same_command_resumes(tmp_path):
@@ -66,7 +108,7 @@ def test_ctrl_c_leaves_a_valid_bag_and_the_same_command_resumes(tmp_path):
     # Started with SIGINT ignored, as a script's background job is (and as CI may start the suite):
     # the launcher must still stop on it.
     process = subprocess.Popen(command, stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True, cwd=REPO,
-                               preexec_fn=lambda: signal.signal(signal.SIGINT, signal.SIG_IGN))
+                               env=graph_env(), preexec_fn=lambda: signal.signal(signal.SIGINT, signal.SIG_IGN))
     journal = run_dir / "curriculum" / "journal.jsonl"
     deadline = time.monotonic() + 180
     while not (journal.is_file() and len(journal.read_text().splitlines()) >= 3):
@@ -80,7 +122,7 @@ def test_ctrl_c_leaves_a_valid_bag_and_the_same_command_resumes(tmp_path):
     interrupted = read(run_dir / "bag", "/glocal/curriculum_state")[-1]
     assert interrupted.status != 5
 
-    resumed = subprocess.run(command, capture_output=True, text=True, timeout=300, cwd=REPO)
+    resumed = subprocess.run(command, capture_output=True, text=True, timeout=300, cwd=REPO, env=graph_env())
     assert resumed.returncode == 0, resumed.stdout + resumed.stderr
     assert resumed.stdout.startswith("resuming")
     final = read(run_dir / "bag.1", "/glocal/curriculum_state")[-1]
@@ -92,14 +134,14 @@ def test_experiment_runs_each_strategy_and_seed_then_reports(tmp_path):
     out = tmp_path / "experiment"
     command = [*CLI, "experiment", "--strategies", "random,glocal", "--seeds", "0", "--preset", "smoke",
                "--out", str(out)]
-    result = subprocess.run(command, capture_output=True, text=True, timeout=600, cwd=REPO)
+    result = subprocess.run(command, capture_output=True, text=True, timeout=600, cwd=REPO, env=graph_env())
     assert result.returncode == 0, result.stdout + result.stderr
     for run in ("random-seed0", "glocal-seed0"):
         assert (out / run / "bag" / "metadata.yaml").is_file()
     report = (out / "report" / "report.md").read_text()
     assert "random" in report and "glocal" in report
 
-    again = subprocess.run(command, capture_output=True, text=True, timeout=120, cwd=REPO)
+    again = subprocess.run(command, capture_output=True, text=True, timeout=120, cwd=REPO, env=graph_env())
     assert again.returncode == 0 and again.stdout.count("finished before") == 2, again.stdout
 
 
@@ -109,7 +151,8 @@ def test_a_hung_learner_is_reported_the_graph_stopped_and_the_run_resumes(tmp_pa
     then finishes the run."""
     run_dir = tmp_path / "run"
     command = [*CLI, "launch", "--preset", "smoke", "--out", str(run_dir), "--seed", "1", "--watchdog", "10"]
-    launched = subprocess.Popen(command, stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True, cwd=REPO)
+    launched = subprocess.Popen(command, stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True, cwd=REPO,
+                                env=graph_env())
     journal = run_dir / "curriculum" / "journal.jsonl"
     try:
         deadline = time.monotonic() + 240
@@ -134,3 +177,55 @@ def test_a_hung_learner_is_reported_the_graph_stopped_and_the_run_resumes(tmp_pa
     resumed = launch(run_dir, "--seed", "1")
     assert resumed.returncode == 0, resumed.stdout + resumed.stderr
     assert "report:" in resumed.stdout
+
+
+def test_a_domain_id_the_user_set_is_kept_else_a_free_one_is_reserved():
+    assert domain_id_from_environment({}) is None and domain_id_from_environment({"ROS_DOMAIN_ID": " "}) is None
+    assert domain_id_from_environment({"ROS_DOMAIN_ID": "0"}) == 0
+    for bad in ("abc", "-1", "233", "1.5"):
+        with pytest.raises(ValueError, match="not a domain id"):
+            domain_id_from_environment({"ROS_DOMAIN_ID": bad})
+
+    free = choose_domain_id({})
+    try:
+        assert not free.from_environment and not free.shared
+        assert hold_domain_id(free.domain_id) is None, "reserved: no other run takes it"
+        assert "a free one" in free.describe()
+    finally:
+        free.close()
+
+    domain_id, lock = reserve_domain_id()
+    lock.close()
+    users = choose_domain_id({"ROS_DOMAIN_ID": str(domain_id)})
+    try:
+        assert (users.domain_id, users.from_environment, users.shared) == (domain_id, True, False)
+        assert hold_domain_id(domain_id) is None, "held while it runs, so that runs choosing a free one keep off"
+        # A second run on the same user's domain: kept, and told that the graphs meet.
+        second = choose_domain_id({"ROS_DOMAIN_ID": str(domain_id)})
+        assert (second.domain_id, second.shared) == (domain_id, True)
+        assert "another run on this machine holds" in second.describe()
+        second.close()
+    finally:
+        users.close()
+
+
+def test_launch_refuses_a_bad_domain_id_or_namespace_before_anything_starts(tmp_path):
+    bad_domain = launch(tmp_path / "run", env=graph_env(ROS_DOMAIN_ID="abc"), timeout=120)
+    assert bad_domain.returncode == 2 and "ROS_DOMAIN_ID='abc' is not a domain id" in bad_domain.stderr
+    bad_namespace = launch(tmp_path / "run", "--namespace", "1robot", timeout=120)
+    assert bad_namespace.returncode == 2 and "invalid namespace '1robot'" in bad_namespace.stderr
+    assert not (tmp_path / "run").exists(), "nothing was claimed or started"
+
+
+def test_namespace_and_sim_time_reach_launch_and_experiment(monkeypatch, tmp_path):
+    import glocal_app.launch
+    from glocal_app.cli import main
+
+    calls = []
+    monkeypatch.setattr(glocal_app.launch, "launch", lambda *args, **kwargs: calls.append((args, kwargs)) or 0)
+    monkeypatch.setattr(glocal_app.launch, "experiment", lambda *args, **kwargs: calls.append((args, kwargs)) or 0)
+    assert main(["launch", "--preset", "smoke", "--out", str(tmp_path), "--namespace", "robot1",
+                 "--use-sim-time"]) == 0
+    assert main(["experiment", "--strategies", "random", "--seeds", "0", "--out", str(tmp_path)]) == 0
+    assert calls[0][1] == {"namespace": "robot1", "use_sim_time": True}
+    assert calls[1][1] == {"namespace": "", "use_sim_time": False}

@@ -12,7 +12,7 @@ from visualization_msgs.msg import Marker
 
 from conftest import wait_until
 from glocal_ros.paths import objects_dir
-from glocal_ros.transforms import Transform, poses_in
+from glocal_ros.transforms import Transform, resolve_frames
 from glocal_ros.urdf import parse_urdf
 from node_common import names, qos
 from node_common.arrays import to_float32_field
@@ -67,7 +67,7 @@ def test_static_and_moving_transforms_place_every_link_where_the_sim_has_it():
     static += [transform_msg(j.parent, j.child, j.origin, stamp) for j in model.joints if j.fixed]
     moving = [transform_msg(j.parent, j.child, simulated[j.parent].inverse() * simulated[j.child], stamp)
               for j in model.joints if not j.fixed]
-    placed = poses_in(WORLD_FRAME, tf_edges([TFMessage(transforms=static), TFMessage(transforms=moving)]))
+    placed = resolve_frames(tf_edges([TFMessage(transforms=static), TFMessage(transforms=moving)]), WORLD_FRAME)
     for link in model.links:
         np.testing.assert_allclose(placed[link].translation, simulated[link].translation, atol=1e-6, err_msg=link)
         # q and -q are the same rotation
@@ -120,8 +120,7 @@ def test_viewers_get_the_robot_the_object_and_sim_time(sim_time_node, ros_node):
 
     model = parse_urdf(received["description"][-1].data)
     edges = tf_edges(received["tf_static"] + received["tf"][-1:])
-    placed = poses_in(WORLD_FRAME, edges)
-    assert set(model.links) | {OBJECT_FRAME} <= set(placed), "every link and the object hang off world"
+    placed = resolve_frames(edges, WORLD_FRAME, [*model.links, OBJECT_FRAME])  # raises for a frame off the tree
     assert placed[OBJECT_FRAME].translation[2] < 0.2  # on the table, in front of the robot
     assert received["joint_states"][-1].name[:7] == [f"panda_joint{i}" for i in range(1, 8)]
 

@@ -25,6 +25,7 @@ from glocal_ros.analysis.runs import (
     milestone_table,
     read_runs,
 )
+from glocal_ros.recording import table_topic
 
 REPORT_NAME = "report.md"
 LEARNED_VS_STEPS_PNG = "learned_vs_steps.png"
@@ -119,6 +120,12 @@ def timeline_section(run: RunData) -> list[str]:
             *_table(("iteration", "steps at start", "global task", "local tasks", "learned in it"), rows), ""]
 
 
+def _count(run: RunData, table_name: str) -> int:
+    """Messages of the table's topic ``table_name`` in ``run``'s bags, under whatever namespace they were recorded."""
+    return sum(count for topic, count in run.message_counts.items()
+               if (spec := table_topic(topic)) is not None and spec.name == table_name)
+
+
 def bags_section(runs: Sequence[RunData], unread: Sequence[Path]) -> list[str]:
     lines = ["## Bags", ""]
     for run in runs:
@@ -127,8 +134,8 @@ def bags_section(runs: Sequence[RunData], unread: Sequence[Path]) -> list[str]:
         for bag, reason in run.bags_skipped:
             lines.append(f"- `{bag}`: **skipped** ({reason})")
     lines += [f"- `{run_dir}`: **no run read** (see the warnings)" for run_dir in unread]
-    total_states = sum(run.message_counts.get(CURRICULUM_STATE_TOPIC, 0) for run in runs)
-    total_episodes = sum(run.message_counts.get(EPISODES_TOPIC, 0) for run in runs)
+    total_states = sum(_count(run, CURRICULUM_STATE_TOPIC) for run in runs)
+    total_episodes = sum(_count(run, EPISODES_TOPIC) for run in runs)
     lines += ["", f"{total_states} curriculum states and {total_episodes} episode records in the bags read.", ""]
     return lines
 

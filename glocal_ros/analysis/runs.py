@@ -4,7 +4,8 @@ A run directory holds ``bag/`` and, when the run was interrupted and resumed,
 ``bag.1/``, ``bag.2/``...; the run is the union of their messages in time
 order. Everything is derived from ``/glocal/curriculum_state`` (one
 CurriculumState after every decision of the curriculum); ``/glocal/episodes``
-is only counted.
+is only counted. Both are found under whatever namespace the bag was
+recorded in (``glocal_ros.recording.table_topic``).
 
 Bags are read with ``rosbags``' AnyReader, which decodes with the message
 definitions embedded in the bag: a bag recorded before a field was added to
@@ -30,10 +31,10 @@ from rosbags.typesys.store import Typestore
 from glocal_ros.curriculum.codes import (
     STATUS_FINISHED, STATUS_STARTING, STATUS_TRAINING_GLOBAL, STATUS_TRAINING_LOCAL, STRATEGY_NAMES,
 )
-from glocal_ros.recording import graph_typestore
+from glocal_ros.recording import graph_typestore, table_topic
 from glocal_ros.sim_contract import PHASE_EVAL
 from glocal_ros.tasks import UnknownTaskError, sorted_tasks
-from glocal_ros.topics import CURRICULUM_STATE, EPISODES_TOPIC
+from glocal_ros.topics import CURRICULUM_STATE, EPISODES, EPISODES_TOPIC, TopicSpec
 
 CURRICULUM_STATE_TOPIC = CURRICULUM_STATE.name
 
@@ -338,8 +339,9 @@ def find_bags(run_dir: Path) -> list[Path]:
     return bags
 
 
-def _messages(bag: Path, topics: Sequence[str], counts: dict[str, int]) -> Iterator[tuple[str, int, object]]:
-    """``(topic, log time, message)`` of ``topics``, decoded with the bag's own definitions.
+def _messages(bag: Path, topics: Sequence[TopicSpec], counts: dict[str, int]) -> Iterator[tuple[str, int, object]]:
+    """``(topic, log time, message)`` of the table's ``topics`` under any namespace, decoded with the bag's own
+    definitions; ``topic`` is the table's name (``/glocal/episodes`` for ``/robot1/glocal/episodes``).
 
     Fills ``counts`` with the messages per topic of the whole bag (from its
     metadata) on opening. Falls back to glocal_interfaces' current definitions
@@ -350,9 +352,12 @@ def _messages(bag: Path, topics: Sequence[str], counts: dict[str, int]) -> Itera
     reader, decode = _open_for_decoding(bag)
     try:
         counts.update({c.topic: c.msgcount for c in reader.connections})
-        connections = [c for c in reader.connections if c.topic in topics]
+        specs = {c.topic: spec for c in reader.connections if (spec := table_topic(c.topic, topics)) is not None}
+        connections = [c for c in reader.connections if c.topic in specs]
+        if not connections:  # an empty selection would mean every topic to rosbags
+            return
         for connection, log_time, raw in reader.messages(connections=connections):
-            yield connection.topic, log_time, decode(raw, connection.msgtype)
+            yield specs[connection.topic].name, log_time, decode(raw, connection.msgtype)
     finally:
         reader.close()
 
@@ -378,7 +383,7 @@ def read_bag(bag: Path, count_episodes: bool = True) -> BagContents:
     if not (bag / "metadata.yaml").is_file():
         # The recorder was killed before closing the bag; `glocal-ros` has a separate repair command.
         raise ReaderError(f"no metadata.yaml (recorder killed?): `glocal-ros bag repair {bag}` recovers it")
-    topics = [CURRICULUM_STATE_TOPIC] + ([EPISODES_TOPIC] if count_episodes else [])
+    topics = [CURRICULUM_STATE] + ([EPISODES] if count_episodes else [])
     states: list[CurriculumSnapshot] = []
     episodes = EpisodeCounts()
     message_counts: dict[str, int] = {}

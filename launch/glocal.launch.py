@@ -1,0 +1,116 @@
+"""``ros2 launch glocal_ros glocal.launch.py``: one run of the whole graph, on a full ROS 2 install.
+
+    ros2 launch glocal_ros glocal.launch.py strategy:=glocal preset:=smoke seed:=0 \\
+        namespace:=robot1 use_sim_time:=true out:=runs/smoke
+
+Arguments (``ros2 launch glocal_ros glocal.launch.py --show-args`` lists them):
+``strategy`` (default glocal), ``preset`` (a parameter file of
+share/glocal_ros/assets/params: smoke, demo, paper; default demo), ``seed``
+(default 0), ``out`` (the run directory; default
+``$ROS_HOME/glocal_ros/runs/<strategy>-seed<seed>``), ``namespace`` (default
+none; relative, so an including launch file's PushRosNamespace prefixes it)
+and ``use_sim_time`` (default false).
+
+It starts recorder_node, sim_node, learner_node and curriculum_node with the
+parameters ``glocal-ros launch`` gives them, from the one plan of both
+(``glocal_app.processes.run_parameters``): the preset's file, the seed, and
+the run directory's ``bag/`` (``bag.1/``, ... on later launches),
+``policies/`` and ``curriculum/``; ``use_sim_time`` goes to sim_node and
+recorder_node only (the learner's and the curriculum's timeouts are
+wall-clock). A directory that holds another run (strategy, preset, seed) is
+refused, as ``glocal-ros launch`` refuses it. When the curriculum node ends
+(its run finished, or it failed) the launch shuts down: the other nodes get
+SIGINT, the recorder closes the bag, and the same command resumes an
+interrupted run.
+
+What ``glocal-ros launch`` adds and this file leaves to ROS: the domain is
+the environment's ``ROS_DOMAIN_ID``, as for any ``ros2 launch``; the four
+nodes start at once (the curriculum waits for the learner's services, the
+learner for the sim's; the recorder, which loads no learning library, is up
+long before the first episode, and logs the first episode's seq if it is
+not 0); no progress bar, no watchdog, no report (``glocal-ros report OUT
+--out OUT/report`` writes it).
+
+Imports only launch, launch_ros, ament_index_python and the standard-library
+module ``glocal_app.processes``: the ``ros2`` command's interpreter need not
+have the project's Python dependencies. ``test/test_launch_file.py`` runs
+``generate_launch_description`` against stand-ins of launch and launch_ros.
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+from ament_index_python.packages import get_package_share_directory
+from launch import LaunchDescription
+from launch.actions import DeclareLaunchArgument, EmitEvent, OpaqueFunction, RegisterEventHandler
+from launch.event_handlers import OnProcessExit
+from launch.events import Shutdown
+from launch_ros.actions import Node
+
+from glocal_app.processes import (RUN_NODES, claim_run_dir, default_run_dir, namespace_remappings, new_bag_path,
+                                  normalize_namespace, preset_file, run_parameters)
+
+PACKAGE = "glocal_ros"
+#: As glocal_ros.curriculum.codes.STRATEGY_NAMES (not imported: see the docstring; a test compares them).
+STRATEGIES = ("glocal", "random", "alp_gmm_250", "alp_gmm_10", "glocal_no_global", "glocal_random_cluster")
+BOOLEANS = ("true", "false")
+
+
+def params_dir() -> Path:
+    return Path(get_package_share_directory(PACKAGE)) / "assets" / "params"
+
+
+def seed_value(text: str) -> int:
+    if not text.strip().isdigit():
+        raise ValueError(f"seed:={text!r}: expected a non-negative integer")
+    return int(text)
+
+
+def run_nodes(context, *args, **kwargs) -> list:
+    """The run's nodes, from the arguments' values (an OpaqueFunction: plain values, not substitutions)."""
+    arguments = context.launch_configurations
+    strategy, preset = arguments["strategy"], arguments["preset"]
+    seed = seed_value(arguments["seed"])
+    use_sim_time = arguments["use_sim_time"].strip().lower() == "true"
+    namespace = normalize_namespace(arguments["namespace"])
+    run_dir = Path(arguments["out"]).expanduser().resolve() if arguments["out"].strip() else \
+        default_run_dir(strategy, seed)
+    params_file = preset_file(preset, params_dir())
+    claim_run_dir(run_dir, strategy, preset, seed)
+    plan = run_parameters(strategy, seed, run_dir, new_bag_path(run_dir), use_sim_time)
+    nodes = {
+        name: Node(
+            package=PACKAGE, executable=name, output="screen",
+            # Relative: an including launch file's PushRosNamespace comes in front of it.
+            namespace=namespace.lstrip("/") or None,
+            parameters=[str(params_file), plan[name]],
+            remappings=namespace_remappings(namespace),
+        )
+        for name in RUN_NODES
+    }
+    # The run is over when the curriculum node ends: stop the rest, as glocal-ros launch does.
+    end_of_run = RegisterEventHandler(OnProcessExit(
+        target_action=nodes["curriculum_node"],
+        on_exit=[EmitEvent(event=Shutdown(reason="curriculum_node ended"))],
+    ))
+    return [*nodes.values(), end_of_run]
+
+
+def generate_launch_description() -> LaunchDescription:
+    presets = sorted(path.stem for path in params_dir().glob("*.yaml"))
+    return LaunchDescription([
+        DeclareLaunchArgument("strategy", default_value="glocal", choices=list(STRATEGIES),
+                              description="the curriculum strategy"),
+        DeclareLaunchArgument("preset", default_value="demo", choices=presets,
+                              description="parameter file of share/glocal_ros/assets/params"),
+        DeclareLaunchArgument("seed", default_value="0", description="seeds the sim's episodes, the learner and "
+                              "the curriculum: the same seed repeats the run"),
+        DeclareLaunchArgument("out", default_value="", description="run directory (bag/, policies/, "
+                              "curriculum/); empty: $ROS_HOME/glocal_ros/runs/<strategy>-seed<seed>"),
+        DeclareLaunchArgument("namespace", default_value="", description="namespace of every node, e.g. robot1 "
+                              "(several graphs on one domain); topics are then /robot1/..."),
+        DeclareLaunchArgument("use_sim_time", default_value="false", choices=list(BOOLEANS),
+                              description="sim_node and recorder_node on the sim's clock (<namespace>/clock)"),
+        OpaqueFunction(function=run_nodes),
+    ])
