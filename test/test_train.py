@@ -319,29 +319,37 @@ def test_evaluations_inside_a_goal_score_as_learner_evaluate_does(graph, ros_nod
     wait_until(lambda: len(eval_records) >= 40, 60, "the evaluations' episodes on glocal/episodes")
 
 
+@pytest.mark.timeout(1800)
 @pytest.mark.parametrize("graph", [GRASPING_SIM], indirect=True)
 def test_a_goal_that_stops_when_learned_stops_at_the_evaluation_that_passed(graph, ros_node):
     """The goal ends with the first evaluation that passes: steps_used is that evaluation's step, and
     nothing is evaluated after it (a second score could undo "learned").
 
-    The prior grasps C3 about 8 times in 10, so the first pass comes by chance; the sim's random
-    streams, seeded by a one-episode request, make it the same chance every run: with seed 2 the check
-    before training scores 8 and the evaluation at 50 steps 10 (SB3's start, random-first: no gradient
-    step in the first 256, so both score the prior). Should the assets change that, pick another seed
-    for which the first pass comes at an interval."""
+    The prior grasps C3 about 8 times in 10, so whether the first pass comes at an interval (not at
+    the check before training, nor never) is chance. A goal's seed fixes that chance, but not across
+    machines: one seed passed at 50 steps on one CPU and never on another (float results differ). So
+    goals seeded 2, 3, ... are tried until one's first pass comes at an interval, and that goal is
+    checked. Before the first gradient step (random-first: none in the first 256) every evaluation
+    scores the prior."""
     graph["learner"].stop()
     learner = graph["start_learner"](fine_tuning="random-first")
     threshold = 8.5
-    evaluations = evaluations_of(ros_node, "trained")
-    call(graph["evaluate"], Evaluate.Request(policy="random", tasks=["C3"], episodes=1, seed=2), 60)
-    goal = Goal(graph["train"], train_goal(task="C3", step_budget=250, eval_interval=50, eval_episodes=10,
-                                           threshold=threshold, stop_when_learned=True))
-    status, result = goal.result(300, processes=[learner])
-    assert status == GoalStatus.STATUS_SUCCEEDED, result.message
-    wait_until(lambda: evaluations and evaluations[-1].scores[0].successes == result.score.successes, 30,
-               "the goal's evaluations on glocal/evaluations")
-    scores = [message.scores[0].successes for message in evaluations]
-    assert result.learned and len(scores) >= 2, f"no interval evaluation passed first: {scores}"
+    tried = []
+    for seed in range(2, 12):
+        evaluations = evaluations_of(ros_node, f"trained-{seed}")
+        goal = Goal(graph["train"], train_goal(task="C3", step_budget=250, eval_interval=50, eval_episodes=10,
+                                               threshold=threshold, stop_when_learned=True, seed=seed,
+                                               output_policy=f"trained-{seed}"))
+        status, result = goal.result(300, processes=[learner])
+        assert status == GoalStatus.STATUS_SUCCEEDED, result.message
+        wait_until(lambda: evaluations and evaluations[-1].scores[0].successes == result.score.successes, 30,
+                   "the goal's evaluations on glocal/evaluations")
+        scores = [message.scores[0].successes for message in evaluations]
+        tried.append((seed, scores))
+        if result.learned and len(scores) >= 2:
+            break
+    else:
+        pytest.fail(f"no seed's first pass came at an interval: {tried}")
     assert all(score <= threshold for score in scores[:-1]) and scores[-1] > threshold, scores
     assert result.steps_used == 50 * (len(scores) - 1), (result.steps_used, scores)
     assert f"learned after {result.steps_used} steps" in result.message
