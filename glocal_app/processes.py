@@ -44,10 +44,9 @@ def preset_file(preset: str, params_dir: Path | None = None) -> Path:
         from glocal_ros.paths import assets_dir
 
         params_dir = assets_dir() / "params"
-    folder = params_dir
-    path = folder / f"{preset}.yaml"
+    path = params_dir / f"{preset}.yaml"
     if not path.is_file():
-        known = sorted(p.stem for p in folder.glob("*.yaml"))
+        known = sorted(p.stem for p in params_dir.glob("*.yaml"))
         raise ValueError(f"unknown preset {preset!r}: expected one of {', '.join(known)}")
     return path
 
