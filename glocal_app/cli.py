@@ -184,16 +184,31 @@ def cmd_bench_graph(args: argparse.Namespace) -> int:
 
 
 def cmd_bench_transfer(args: argparse.Namespace) -> int:
-    from glocal_app.benches.transfer import run_transfer_bench, run_transfer_graph, transfer_bench_report
+    from glocal_app.benches.transfer import (read_transfer_goals, run_transfer_bench, run_transfer_graph,
+                                             transfer_bench_report)
 
     settings = TransferSettings(step_budget=args.budget, eval_interval=args.eval_interval,
                                 eval_episodes=args.eval_episodes, num_envs=args.envs)
+    command = "glocal-ros " + " ".join(sys.argv[1:])
+    if args.tabulate:
+        try:
+            goals = [goal for source in args.tabulate for goal in read_transfer_goals(source, settings)]
+            keys = [(goal.recipe, goal.prior, goal.task, goal.seed) for goal in goals]
+            if len(set(keys)) != len(keys):
+                repeated = next(key for key in keys if keys.count(key) > 1)
+                raise ValueError("the goal (recipe, prior, task, seed) = {} is in the reports more than once"
+                                 .format(", ".join(map(str, repeated))))
+        except (OSError, ValueError) as error:
+            print(f"bench transfer --tabulate: {error}", file=sys.stderr)
+            return 1
+        return write_bench_report(transfer_bench_report(goals, command, settings, 0, sources=args.tabulate),
+                                  args.out)
     seeds = [int(seed) for seed in args.seeds.split(",")]
     recipes, tasks, priors = args.recipes.split(","), args.tasks.split(","), args.priors.split(",")
     arms = dict(priors=priors, prior_store=args.prior_store)
     goals = (run_transfer_graph(recipes, tasks, seeds, settings, **arms) if args.graph
              else run_transfer_bench(recipes, tasks, seeds, settings, args.jobs, **arms))
-    report = transfer_bench_report(goals, "glocal-ros " + " ".join(sys.argv[1:]), settings, args.jobs, args.graph)
+    report = transfer_bench_report(goals, command, settings, args.jobs, args.graph)
     return write_bench_report(report, args.out)
 
 
@@ -356,6 +371,9 @@ def build_parser() -> argparse.ArgumentParser:
                                 help="goals run at a time in-process")
     bench_transfer.add_argument("--graph", action="store_true",
                                 help="through sim_node + learner_node processes (a pair per arm, all at once)")
+    bench_transfer.add_argument("--tabulate", type=Path, nargs="+", default=None, metavar="REPORT",
+                                help="run nothing: tabulate together the goals of these earlier reports (made "
+                                     "with this --budget and --eval-interval)")
     bench_transfer.add_argument("--out", type=Path, default=Path("bench/results/transfer.md"))
     bench_transfer.set_defaults(func=cmd_bench_transfer)
 

@@ -23,6 +23,7 @@ from typing import Any
 
 from glocal_ros.files import atomic_write
 from learner_node.replay_buffer import Experience, load_experience, save_experience
+from learner_node.sac_settings import use_torch_threads
 
 METADATA_FILE = "policy.json"
 _NAME = re.compile(r"^[A-Za-z0-9_][A-Za-z0-9_.-]{0,127}$")
@@ -90,9 +91,10 @@ class PolicyStore:
         return self.root / name / self.record(name).model_file
 
     def load(self, name: str, **kwargs):
-        """The stable-baselines3 SAC model of ``name``."""
+        """The stable-baselines3 SAC model of ``name``, in a process whose torch runs as the learner's."""
         from stable_baselines3 import SAC
 
+        use_torch_threads()
         return SAC.load(self.model_path(name), device="cpu", **kwargs)
 
     def experience(self, name: str) -> Experience | None:

@@ -22,7 +22,7 @@ import gymnasium as gym
 import numpy as np
 
 from learner_node.replay_buffer import Experience, recent_experience
-from learner_node.sac_settings import DEFAULT_NETWORK, TORCH_THREADS, network
+from learner_node.sac_settings import DEFAULT_NETWORK, network, use_torch_threads
 
 Demonstrator = Callable[[gym.Env], np.ndarray]
 
@@ -82,11 +82,10 @@ def _add_episode(buffer, env: gym.Env, act: Callable[[np.ndarray], np.ndarray], 
 def train_prior(make_env: Callable[[], gym.Env], demonstrator: Demonstrator, work_dir: Path,
                 config: PriorConfig = PriorConfig(), progress: Callable[[int, float], None] | None = None):
     """Train (or resume training) the prior; returns the SAC model."""
-    import torch
     from stable_baselines3 import SAC
     from stable_baselines3.common.callbacks import BaseCallback
 
-    torch.set_num_threads(TORCH_THREADS)
+    use_torch_threads()
     work_dir.mkdir(parents=True, exist_ok=True)
     checkpoint, buffer_file = work_dir / "checkpoint.zip", work_dir / "replay_buffer.pkl"
     env = make_env()

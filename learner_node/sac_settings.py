@@ -25,6 +25,21 @@ from typing import Any, Literal
 
 TORCH_THREADS = 1
 
+
+def use_torch_threads() -> None:
+    """Run this process's torch on ``TORCH_THREADS`` threads.
+
+    Besides speed, this makes a seeded evaluation a function of its seed: on
+    two threads torch splits a matrix product by how busy the threads are,
+    the sums round differently, and a long contact-rich episode can end
+    otherwise (the prior on G6 with the same seeded episodes: 14 or 15 of 20
+    from run to run on 2 threads, 16 every time on one). Whoever acts with or
+    trains a model calls it first.
+    """
+    import torch
+
+    torch.set_num_threads(TORCH_THREADS)
+
 #: Everything of a new model but its ``Network``.
 SAC_KWARGS: dict[str, Any] = dict(
     learning_rate=3e-4,
@@ -68,6 +83,10 @@ EXPERIENCE_TRANSITIONS = 10_000
 
 #: What a goal's model acts with until its first batch of transitions is in the replay buffer.
 FirstActions = Literal["random", "policy"]
+#: The Adam moments a goal's actor and critics start with (``FineTuning.optimizers``).
+Optimizers = Literal["stored", "fresh", "unseen-as-bias"]
+#: Where the first-layer weights of a task bit the stored model never trained on start (``FineTuning``).
+NewTaskInputs = Literal["initial", "trained-mean"]
 
 
 @dataclass(frozen=True)
@@ -85,12 +104,46 @@ class FineTuning:
     last this many of its buffer (``learner_node.replay_buffer``), so that a
     fine-tuned critic still sees the data its parent learned from; 0: an
     empty buffer and nothing kept, SB3's way.
+
+    ``critic_warmup``: the gradient steps owed for a goal's first this many
+    training steps update the critics (and the entropy coefficient) but not
+    the actor, so that the actor's first updates follow a critic fitted to
+    the new task: a task the stored model never trained on is a one-hot input
+    whose first-layer weights are still at their initial values, and its Q
+    there is arbitrary. Only for a model loaded from the store: a warm model
+    (``keep_replay_buffer``) goes on with the critic it has. 0: SB3's way.
+
+    ``optimizers``: the actor's and critics' Adam moments at the goal's
+    start. ``"stored"``: SB3's way, the stored model's. Those carry the step
+    count of the model's whole training, so Adam no longer corrects its
+    moments for their start, and they are exactly zero for the weights of
+    inputs the model never saw (a stored prior: every one-hot bit but its
+    task's). On a new task those weights then move by about 3 to 6 times the
+    learning rate per gradient step for hundreds of steps (first step
+    m / sqrt(v) = 0.1 / sqrt(0.001)). ``"fresh"``: new moments for every
+    weight, at step 0, as a new model's. ``"unseen-as-bias"``: the stored
+    moments, and an input that never had a gradient gets, in each layer, the
+    second moments of that layer's bias (a one-hot bit that is on is a bias),
+    so its weights start moving at the pace of the rest. Only for a model
+    loaded from the store, as ``critic_warmup``.
+
+    ``new_task_inputs``: the first-layer weights (actor and critics) of the
+    goal's task bits that the stored model never trained on. ``"initial"``:
+    SB3's way, their initial values, so a new task is an input the networks
+    never saw and the critic's Q there is arbitrary. ``"trained-mean"``: the
+    mean of the task bits it trained on, weights and Adam second moments (no
+    momentum), so the model meets the new task as one it knows, and what
+    differs is the object (``learner_node.fine_tuning``). The goal's check
+    before its first step scores this model, not the stored one.
     """
 
     first_actions: FirstActions = "random"
     batch_size: int | None = None  # None: the stored model's own
     learning_rate: float | None = None  # None: the stored model's own
     experience: int = 0
+    critic_warmup: int = 0
+    optimizers: Optimizers = "stored"
+    new_task_inputs: NewTaskInputs = "initial"
 
     def __post_init__(self) -> None:
         if self.first_actions not in ("random", "policy"):
@@ -101,18 +154,37 @@ class FineTuning:
             raise ValueError(f"learning_rate must be positive, got {self.learning_rate}")
         if self.experience < 0:
             raise ValueError(f"experience must not be negative, got {self.experience}")
+        if self.optimizers not in ("stored", "fresh", "unseen-as-bias"):
+            raise ValueError(f"optimizers must be 'stored', 'fresh' or 'unseen-as-bias', got {self.optimizers!r}")
+        if self.new_task_inputs not in ("initial", "trained-mean"):
+            raise ValueError(f"new_task_inputs must be 'initial' or 'trained-mean', got {self.new_task_inputs!r}")
+        if self.critic_warmup < 0:
+            raise ValueError(f"critic_warmup must not be negative, got {self.critic_warmup}")
 
 
-#: The recipes ``glocal-ros bench transfer`` measured (``bench/results/transfer*.md``); the learner's default is
-#: ``parent-experience``: from the same prior, tasks and seeds, 14 of 24 goals of 3k steps ended above B
-#: (median final score 16/20) where SB3's way (``random-first``) ended 6 of 24 above it (10.5/20).
+#: The recipes ``glocal-ros bench transfer`` measured (``bench/results/transfer*.md``). The learner's default is
+#: ``parent-experience-task-inputs``: from the same prior, tasks and seeds, 24 of 24 goals of 3k steps passed B
+#: (median steps to B 500; 2 collapses) where ``parent-experience`` passed 19 (2000; 12 collapses)
+#: (``transfer-task-inputs.md``); the other candidates did not stop the early dip (``transfer-screening.md``).
 FINE_TUNING_RECIPES: dict[str, FineTuning] = {
     "random-first": FineTuning(),  # SB3's way: an empty buffer, a batch of random actions first
     "policy-first": FineTuning(first_actions="policy"),
     "policy-first-lr1e-4": FineTuning(first_actions="policy", learning_rate=1e-4),
     "parent-experience": FineTuning(first_actions="policy", experience=EXPERIENCE_TRANSITIONS),
+    "parent-experience-critic-warmup-500": FineTuning(first_actions="policy", experience=EXPERIENCE_TRANSITIONS,
+                                                      critic_warmup=500),
+    "parent-experience-critic-warmup-1000": FineTuning(first_actions="policy", experience=EXPERIENCE_TRANSITIONS,
+                                                       critic_warmup=1000),
+    "parent-experience-lr1e-4": FineTuning(first_actions="policy", experience=EXPERIENCE_TRANSITIONS,
+                                           learning_rate=1e-4),
+    "parent-experience-fresh-adam": FineTuning(first_actions="policy", experience=EXPERIENCE_TRANSITIONS,
+                                               optimizers="fresh"),
+    "parent-experience-unseen-moments": FineTuning(first_actions="policy", experience=EXPERIENCE_TRANSITIONS,
+                                                   optimizers="unseen-as-bias"),
+    "parent-experience-task-inputs": FineTuning(first_actions="policy", experience=EXPERIENCE_TRANSITIONS,
+                                                new_task_inputs="trained-mean"),
 }
-DEFAULT_RECIPE = "parent-experience"
+DEFAULT_RECIPE = "parent-experience-task-inputs"
 DEFAULT_FINE_TUNING = FINE_TUNING_RECIPES[DEFAULT_RECIPE]
 
 

@@ -27,8 +27,9 @@ Choices:
 - A goal starts from the stored model with an empty replay buffer (what
   loading an SB3 model gives) or, when the trainer's ``FineTuning`` says so,
   with the experience its initial policy keeps; updates start once a batch
-  of transitions is in it; what it acts with until then, its batch and its
-  learning rate are the ``FineTuning`` too (``learner_node.sac_settings``).
+  of transitions is in it; what it acts with until then, its batch, its
+  learning rate and how many of its first steps update the critics only are
+  the ``FineTuning`` too (``learner_node.sac_settings``).
   ``keep_replay_buffer`` continues the previous goal's model and buffer
   instead, when the goal starts from that goal's output: the baselines
   train one policy through many short goals.
@@ -64,10 +65,11 @@ from glocal_ros.seeds import MAX_SEED, derived_seed
 from glocal_ros.sim_contract import BatchStepper
 from glocal_ros.tasks import validate_tasks
 from learner_node.evaluation import Score, evaluate
+from learner_node.fine_tuning import start_fine_tuning
 from learner_node.policies import RANDOM_POLICY, PolicyRegistry
 from learner_node.policy_store import PolicyRecord, check_name
 from learner_node.replay_buffer import add_experience, load_replay_buffer, recent_experience, save_replay_buffer
-from learner_node.sac_settings import DEFAULT_FINE_TUNING, SAC_KWARGS, TORCH_THREADS, FineTuning
+from learner_node.sac_settings import DEFAULT_FINE_TUNING, SAC_KWARGS, FineTuning, use_torch_threads
 from learner_node.updates import OverlappedUpdates
 from learner_node.vec_env import BatchVecEnv, TaskCycle
 
@@ -165,6 +167,7 @@ class _GoalState:
     score: dict | None = None
     learned: bool = False
     steps_at_last_eval: int = 0
+    critic_warmup: int = 0  # the goal's first steps whose gradient steps leave the actor as it is
 
 
 class Trainer:
@@ -197,9 +200,7 @@ class Trainer:
         the first step, each interval, the end) as soon as it is scored, with the goal's training
         steps it scored the policy after: the record of what the goal's decisions were based on.
         """
-        import torch
-
-        torch.set_num_threads(TORCH_THREADS)
+        use_torch_threads()
         finished = self._finished_before(spec, self.checkpoint_root / spec.output_policy)
         if finished is not None:
             return finished
@@ -252,6 +253,8 @@ class Trainer:
             return model, 0
         model = SAC.load(store_path, env=vec_env, device="cpu")
         self._start_buffer(model, spec)
+        state.critic_warmup = self.fine_tuning.critic_warmup  # a warm model's critic has seen its data
+        start_fine_tuning(model, self.fine_tuning, spec.episode_tasks or (spec.task,))
         return model, 0
 
     def _start_buffer(self, model, spec: TrainSpec) -> None:
@@ -494,7 +497,7 @@ class _Goal:
         keep_going = (not self.stop_reason and not (spec.stop_when_learned and state.learned)
                       and not (spec.episode_limit and len(state.episodes) >= spec.episode_limit))
         if keep_going:  # SB3 skips the updates of the step that stops it
-            self.updates.owe(self.vec_env.num_envs)
+            self.updates.owe(self.vec_env.num_envs, critic_only=steps <= state.critic_warmup)
         return keep_going
 
     def evaluate(self, steps: int) -> None:

@@ -13,12 +13,18 @@ updates of step t (a lag of one vector step); the number of gradient steps,
 their batches and when learning starts are SB3's. The owed steps are paid
 before anything looks at the model (evaluation, checkpoint, store), so the
 saved models and the goal's outcome are those of the plain loop's order.
+
+A goal may owe some gradient steps as critic-only (``FineTuning.critic_warmup``):
+SB3's own ``train`` with the actor's parameters frozen, so the critics, their
+targets and the entropy coefficient update and the actor does not.
 """
 
 from __future__ import annotations
 
 from contextlib import contextmanager
 from typing import Iterator
+
+import torch
 
 
 class OverlappedUpdates:
@@ -27,6 +33,7 @@ class OverlappedUpdates:
     def __init__(self, model):
         self.model = model
         self.owed = 0
+        self.owed_critic_only = 0
         self._gradient_steps = model.gradient_steps  # the model's own setting, restored on exit
 
     def __enter__(self) -> "OverlappedUpdates":
@@ -39,20 +46,29 @@ class OverlappedUpdates:
         finally:
             self.model.gradient_steps = self._gradient_steps
 
-    def owe(self, env_steps: int) -> None:
+    def owe(self, env_steps: int, critic_only: bool = False) -> None:
         """After a vector step of ``env_steps`` that SB3 would follow with updates: what it would do.
 
         SB3 starts updating after ``learning_starts``; a goal that acts with its
         policy from the first step (``learning_starts`` at the goal's start) also
         waits until the buffer holds a batch: SB3 would sample one from fewer rows.
+        ``critic_only``: these gradient steps leave the actor as it is.
         """
         buffer = self.model.replay_buffer
         batch_in = buffer.size() * buffer.n_envs >= self.model.batch_size  # size(): rows of n_envs transitions
         if self.model.num_timesteps > self.model.learning_starts and batch_in:
-            self.owed += self._gradient_steps if self._gradient_steps >= 0 else env_steps
+            steps = self._gradient_steps if self._gradient_steps >= 0 else env_steps
+            if critic_only:
+                self.owed_critic_only += steps
+            else:
+                self.owed += steps
 
     def pay(self) -> None:
-        """Run the owed gradient steps now."""
+        """Run the owed gradient steps now, in the order they were owed (critic-only ones come first)."""
+        if self.owed_critic_only > 0:
+            owed, self.owed_critic_only = self.owed_critic_only, 0
+            with frozen(self.model.actor):
+                self.model.train(gradient_steps=owed, batch_size=self.model.batch_size)
         if self.owed > 0:
             owed, self.owed = self.owed, 0
             self.model.train(gradient_steps=owed, batch_size=self.model.batch_size)
@@ -67,3 +83,16 @@ class OverlappedUpdates:
             yield
         finally:
             self.model.gradient_steps = overlapping
+
+
+@contextmanager
+def frozen(module: torch.nn.Module) -> Iterator[None]:
+    """``module``'s parameters get no gradient, so its optimiser skips them (Adam moments included)."""
+    parameters = [parameter for parameter in module.parameters() if parameter.requires_grad]
+    for parameter in parameters:
+        parameter.requires_grad_(False)
+    try:
+        yield
+    finally:
+        for parameter in parameters:
+            parameter.requires_grad_(True)

@@ -5,8 +5,8 @@ from pathlib import Path
 import pytest
 
 from glocal_app.benches.learner import LearnerBenchRow, learner_bench_report, run_learner_bench
-from glocal_app.benches.transfer import (TransferGoal, TransferSettings, run_transfer_bench, run_transfer_graph,
-                                        transfer_bench_report)
+from glocal_app.benches.transfer import (TransferGoal, TransferSettings, read_transfer_goals, run_transfer_bench,
+                                        run_transfer_graph, transfer_bench_report)
 from glocal_app.cli import build_parser, cmd_bench_learner, cmd_bench_transfer
 from glocal_ros.paths import assets_dir
 from learner_node.policy_store import PolicyStore
@@ -74,7 +74,7 @@ def test_bench_transfer_runs_every_arm_on_the_same_episodes_and_tabulates_them(t
     assert "Command: `glocal-ros bench transfer --tasks A0`" in report
     rows = [line for line in report.splitlines() if line.startswith(("| random-first |", "| policy-first |"))]
     assert len(rows) == 8  # one summary row and one goal row per arm
-    assert all(line.count("|") == 10 for line in rows[:4])  # nine summary columns
+    assert all(line.count("|") == 13 for line in rows[:4])  # twelve summary columns
     assert all(line.count("|") == 11 for line in rows[4:])  # recipe, prior, task, seed, 3 scores, to B, drop, s
 
     # The same goals through a sim_node and a learner_node: the same episodes, so the same start.
@@ -84,6 +84,42 @@ def test_bench_transfer_runs_every_arm_on_the_same_episodes_and_tabulates_them(t
     assert [steps for steps, _ in through_graph.curve] == [0, 4, 8]
     assert through_graph.start == goals[1].start
     assert "through the graph" in transfer_bench_report([through_graph], "x", settings, jobs=1, graph=True)
+
+
+def test_a_transfer_report_is_read_back_and_tabulated_with_another(tmp_path, capsys):
+    """``--tabulate``: the goals of earlier reports, read from their per-goal tables, in one report."""
+    settings = TransferSettings(step_budget=1000, eval_interval=500)
+
+    def goal(recipe, seed, *scores):
+        return TransferGoal(recipe, "B1", seed, tuple(zip((0, 500, 1000), scores)), 20, settings.threshold, 12.0)
+
+    first = tmp_path / "first.md"
+    first.write_text(transfer_bench_report([goal("a", 0, 3, 9, 16), goal("a", 1, 17, 18, 2)], "x", settings, 2))
+    second = tmp_path / "second.md"
+    second.write_text(transfer_bench_report([goal("b", 0, 3, 1, 4)], "y", settings, 2))
+    assert read_transfer_goals(first, settings) == [goal("a", 0, 3, 9, 16), goal("a", 1, 17, 18, 2)]
+
+    out = tmp_path / "both.md"
+    args = build_parser().parse_args(["bench", "transfer", "--budget", "1000", "--tabulate", str(first), str(second),
+                                      "--out", str(out)])
+    assert cmd_bench_transfer(args) == 0
+    report = out.read_text()
+    assert f"the goals of `{first}`, `{second}`" in report
+    summary = {line.split("|")[1].strip(): [cell.strip() for cell in line.strip("|").split("|")]
+               for line in report.splitlines() if line.startswith(("| a | prior | 2 ", "| b | prior | 1 "))}
+    # goals, passed B, median steps to B, started below B, of those passed, their median steps to B, collapses
+    assert summary["a"][2:9] == ["2", "2", "500", "1", "1", "1000", "1"]
+    assert summary["b"][2:9] == ["1", "0", "never", "1", "0", "never", "0"]
+
+    # Another budget, or a file without the table: refused, naming the file, nothing written.
+    out.unlink()
+    for bad in (["--budget", "1500", "--tabulate", str(first)], ["--budget", "1000", "--tabulate", str(out)],
+                ["--budget", "1000", "--tabulate", str(first), str(first)]):
+        assert cmd_bench_transfer(build_parser().parse_args(["bench", "transfer", *bad, "--out", str(out)])) == 1
+        assert not out.exists()
+    errors = capsys.readouterr().err
+    assert f"{first}: its goals were scored at steps 0, 500, 1000" in errors
+    assert "(recipe, prior, task, seed) = a, prior, B1, 0 is in the reports more than once" in errors
 
 
 def test_a_transfer_curve_gives_steps_to_b_and_collapse():

@@ -123,6 +123,46 @@ def test_an_unknown_recipe_or_setting_is_refused_with_the_choices():
         FineTuning(first_actions="demonstrations")
     with pytest.raises(ValueError, match="batch_size"):
         FineTuning(batch_size=0)
+    with pytest.raises(ValueError, match="critic_warmup"):
+        FineTuning(critic_warmup=-1)
+
+
+def test_critic_warmup_leaves_the_actor_alone_for_the_first_steps_then_updates_both(tmp_path, monkeypatch):
+    """The gradient steps owed for a goal's first ``critic_warmup`` steps move the critics and not the actor;
+    every later one moves both; the goal does as many gradient steps as without a warm-up."""
+    import torch
+    from stable_baselines3 import SAC
+
+    def flat(module):
+        return torch.cat([parameter.detach().flatten() for parameter in module.parameters()]).clone()
+
+    num_envs, batch, warmup, step_budget = 2, 32, 60, 100
+    calls: list[tuple[int, bool, bool]] = []  # (gradient steps, the actor moved, the critic moved)
+    real_train = SAC.train
+
+    def noted_train(model, gradient_steps, batch_size=64):
+        actor, critic = flat(model.actor), flat(model.critic)
+        real_train(model, gradient_steps, batch_size)
+        calls.append((gradient_steps, not torch.equal(actor, flat(model.actor)),
+                      not torch.equal(critic, flat(model.critic))))
+
+    monkeypatch.setattr(SAC, "train", noted_train)
+    envs = BatchedEnvs(lambda i: GraspEnv("A0"), num_envs, "A0")
+    policies = PolicyRegistry(PolicyStore(tmp_path / "store"), [PolicyStore(assets_dir() / "priors")])
+    try:
+        outcome = Trainer(envs, policies, tmp_path / "checkpoints", fine_tuning=FineTuning(
+            first_actions="policy", batch_size=batch, critic_warmup=warmup)).train(TrainSpec(
+                "A0", "prior", "a0", step_budget=step_budget, threshold=0, eval_episodes=1))
+    finally:
+        envs.close()
+
+    assert outcome.completed and outcome.steps_used == step_budget
+    critic_only = [steps for steps, actor_moved, _ in calls if not actor_moved]
+    both = [steps for steps, actor_moved, _ in calls if actor_moved]
+    assert all(critic_moved for _, _, critic_moved in calls)
+    assert [actor_moved for _, actor_moved, _ in calls] == [False] * len(critic_only) + [True] * len(both)
+    assert sum(both) == step_budget - warmup  # UTD 1 after the warm-up
+    assert sum(critic_only) == warmup - batch  # the warm-up's updates, from the step a batch is in
 
 
 def test_parent_experience_starts_the_buffer_and_the_stored_policy_keeps_the_newest(tmp_path, monkeypatch):

@@ -33,6 +33,10 @@ the curriculum's ``RosLearner``; the arms' pairs run at once. The start is the p
 ``learner/evaluate`` on the same episodes, the curve the goal's evaluations
 on ``glocal/evaluations`` (the k-th one at k intervals: the settings make
 every evaluation fall exactly on its step).
+
+``read_transfer_goals`` reads the goals back from a report's per-goal table,
+so that arms that ran on different days (same tasks, seeds and settings, hence
+the same episodes) are tabulated side by side without running them again.
 """
 
 from __future__ import annotations
@@ -314,13 +318,47 @@ def run_transfer_graph(recipes: Sequence[str], tasks: Sequence[str], seeds: Sequ
     return sorted((g for goals in per_arm for g in goals), key=lambda g: order[(g.task, g.seed)])
 
 
+def read_transfer_goals(path: Path, settings: TransferSettings) -> list[TransferGoal]:
+    """The goals of the per-goal table of a ``transfer_bench_report`` at ``path``.
+
+    ``ValueError`` naming the file when it has no such table or its goals were
+    scored at other steps than ``settings`` scores at; reports made before
+    arms had priors (no prior column) are read as from ``INITIAL_POLICY``.
+    """
+    expected = [str(steps) for steps in range(0, settings.step_budget + 1, settings.eval_interval)]
+    goals, columns = [], None
+    for line in Path(path).read_text().splitlines():
+        cells = [cell.strip() for cell in line.strip().strip("|").split("|")]
+        if cells[:1] == ["recipe"] and "task" in cells:
+            columns = cells
+            scored_at = columns[columns.index("seed") + 1:columns.index("steps to B")]
+            if scored_at != expected:
+                raise ValueError(f"{path}: its goals were scored at steps {', '.join(scored_at)}, not at "
+                                 f"{', '.join(expected)} (--budget {settings.step_budget} --eval-interval "
+                                 f"{settings.eval_interval})")
+        elif columns and len(cells) == len(columns) and not cells[0].startswith("---"):
+            row = dict(zip(columns, cells))
+            goals.append(TransferGoal(
+                row["recipe"], row["task"], int(row["seed"]),
+                tuple((int(steps), int(row[steps])) for steps in expected),
+                settings.eval_episodes, settings.threshold, float(row["s"]), row.get("prior", INITIAL_POLICY)))
+    if not goals:
+        raise ValueError(f"{path}: no per-goal table of a bench transfer report in it")
+    return goals
+
+
 def _median_steps_to_b(goals: Sequence[TransferGoal]) -> float:
     """Median with the goals that never passed B counted as infinitely slow."""
     return statistics.median(math.inf if g.steps_to_b is None else g.steps_to_b for g in goals)
 
 
+def _steps(median: float) -> str:
+    return "never" if math.isinf(median) else f"{median:.0f}"
+
+
 def transfer_bench_report(goals: Sequence[TransferGoal], command: str, settings: TransferSettings,
-                          jobs: int, graph: bool = False) -> str:
+                          jobs: int, graph: bool = False, sources: Sequence[Path] = ()) -> str:
+    """The report; ``sources``: the goals were read from these earlier reports, not run."""
     arms = list(dict.fromkeys(g.arm for g in goals))
     tasks = list(dict.fromkeys(g.task for g in goals))
     seeds = sorted({g.seed for g in goals})
@@ -330,28 +368,35 @@ def transfer_bench_report(goals: Sequence[TransferGoal], command: str, settings:
         "",
         f"Command: `{command}`  ",
         f"{time.strftime('%Y-%m-%d %H:%M')}, Python {sys.version.split()[0]}, {os.cpu_count()} CPU cores, "
-        + ("through the graph (a sim_node and a learner_node per arm, the arms at once)" if graph else
+        + (f"the goals of {', '.join(f'`{source}`' for source in sources)}, tabulated together (how and when "
+           "they ran: see those files)" if sources else
+           "through the graph (a sim_node and a learner_node per arm, the arms at once)" if graph else
            f"in-process, {jobs} goal{'s' if jobs != 1 else ''} at a time")
-        + f". Load average at the end {os.getloadavg()[0]:.1f} (the machine is shared). One seeded Train goal "
+        + ("" if sources else f". Load average at the end {os.getloadavg()[0]:.1f} (the machine is shared)")
+        + ". One seeded Train goal "
         f"per recipe, prior ({', '.join(f'`{prior}`' for prior in priors)}), task and seed: "
         f"{settings.step_budget} training steps on "
         f"{settings.num_envs} envs, scored every "
         f"{settings.eval_interval} steps over {settings.eval_episodes} deterministic episodes, not stopped when "
         f"learned; B = {settings.threshold:g}. Tasks {', '.join(tasks)}; seeds {', '.join(map(str, seeds))}. "
         f"Steps to B: the first evaluation above B (a prior already above it: 0); the median counts a goal "
-        f"that never passed as slower than all. Collapse: a score {COLLAPSE_POINTS:g} or more points of 100 "
-        f"below the start from step {COLLAPSE_AFTER} on. Wall-clock per goal includes its evaluations.",
+        f"that never passed as slower than all. A curriculum trains only tasks below B, so the columns of the "
+        f"goals that started below B are the speed that matters. Collapse: a score {COLLAPSE_POINTS:g} or more "
+        f"points of 100 below the start from step {COLLAPSE_AFTER} on. Wall-clock per goal includes its "
+        f"evaluations.",
         "",
-        "| recipe | prior | goals | passed B | median steps to B | collapses | median drop (points) "
-        "| median final score | median wall-clock per goal (s) |",
-        "| --- | --- | ---: | ---: | ---: | ---: | ---: | ---: | ---: |",
+        "| recipe | prior | goals | passed B | median steps to B | started below B | of those passed "
+        "| their median steps to B | collapses | median drop (points) | median final score "
+        "| median wall-clock per goal (s) |",
+        "| --- | --- | ---: | ---: | ---: | ---: | ---: | ---: | ---: | ---: | ---: | ---: |",
     ]
     for recipe, prior in arms:
         mine = [g for g in goals if g.arm == (recipe, prior)]
-        median = _median_steps_to_b(mine)
+        below = [g for g in mine if g.steps_to_b != 0]
         lines.append(
             f"| {recipe} | {prior} | {len(mine)} | {sum(g.steps_to_b is not None for g in mine)} "
-            f"| {'never' if math.isinf(median) else f'{median:.0f}'} | {sum(g.collapsed for g in mine)} "
+            f"| {_steps(_median_steps_to_b(mine))} | {len(below)} | {sum(g.steps_to_b is not None for g in below)} "
+            f"| {_steps(_median_steps_to_b(below)) if below else '-'} | {sum(g.collapsed for g in mine)} "
             f"| {statistics.median(g.drop_points for g in mine):.0f} "
             f"| {statistics.median(g.final for g in mine):.0f} / {settings.eval_episodes} "
             f"| {statistics.median(g.wall_s for g in mine):.0f} |")
