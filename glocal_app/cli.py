@@ -19,7 +19,9 @@ from glocal_ros.curriculum.codes import STRATEGY_NAMES
 from glocal_ros.curriculum.learner import passes_threshold
 from glocal_ros.paths import assets_dir, objects_dir
 from glocal_ros.tasks import parse_task_list, sorted_tasks
-from learner_node.sac_settings import DEFAULT_NETWORK, EXPERIENCE_TRANSITIONS, FINE_TUNING_RECIPES, NETWORKS
+from learner_node.prior import PriorConfig
+from learner_node.sac_settings import (DEFAULT_NETWORK, DEFAULT_RECIPE, EXPERIENCE_TRANSITIONS, FINE_TUNING_RECIPES,
+                                       NETWORKS)
 
 #: The ament package that installs the nodes' executables.
 PACKAGE = "glocal_ros"
@@ -94,55 +96,106 @@ def add_graph_arguments(parser: argparse.ArgumentParser) -> None:
                              "curriculum's timeouts stay wall-clock")
 
 
+def _progress(stage: str, done: int, total: int) -> None:
+    if done == total or done % max(1, total // 20) == 0:
+        print(f"{stage}: {done}/{total}", flush=True)
+
+
 def cmd_assets_generate(args: argparse.Namespace) -> int:
-    from glocal_ros.objects import generate_object_set
+    from functools import partial
 
-    def progress(stage: str, done: int, total: int) -> None:
-        if done == total or done % max(1, total // 20) == 0:
-            print(f"{stage}: {done}/{total}", flush=True)
+    from glocal_ros.objects import MeasuredGrid, generate_object_set
+    from sim_node.scripted_grasp import grasp_trial
 
+    shortlist = {} if args.per_column is None else {"per_column": args.per_column}
+    measured = None if args.grid == "geometric" else MeasuredGrid(
+        partial(grasp_trial, perturbed_episodes=args.perturbed_episodes), **shortlist)
     generate_object_set(args.out, seed=args.seed, candidates=args.candidates, workers=args.workers,
-                        progress=progress)
+                        progress=_progress, measured=measured)
     print(f"wrote {args.out}")
     return cmd_assets_check(args) if args.check_episodes else 0
 
 
 def cmd_assets_import_egad(args: argparse.Namespace) -> int:
-    from glocal_ros.objects import import_egad
+    from glocal_ros.objects import BadMeshError, MissingEgadFilesError, import_egad
 
-    import_egad(args.egad_dir, args.out, require_all=not args.partial)
+    try:
+        import_egad(args.egad_dir, args.out, require_all=not args.partial, progress=_progress)
+    except (BadMeshError, MissingEgadFilesError) as error:
+        print(f"assets import-egad: {error}; {args.out} is unchanged", file=sys.stderr)
+        return 1
     print(f"wrote {args.out}")
     return cmd_assets_check(args) if args.check_episodes else 0
 
 
 def cmd_assets_check(args: argparse.Namespace) -> int:
-    """The scripted grasp on every object; rates stored in objects.json."""
-    from glocal_ros.objects import ObjectSetMetadata, record_scripted_grasp_success
-    from sim_node.scripted_grasp import graspability
+    """The scripted grasp and the perturbed grasp on every object; rates stored in objects.json."""
+    from glocal_ros.objects import ObjectSetMetadata, record_grasp_success
+    from sim_node.scripted_grasp import GraspErrors, graspability
 
     tasks = sorted_tasks(ObjectSetMetadata.load(args.out).objects)
-    rates = graspability(args.out, tasks, args.check_episodes, seed=args.seed,
-                         progress=lambda task, rate: print(f"{task}: scripted grasp {rate:.0%}", flush=True))
-    record_scripted_grasp_success(args.out, rates)
-    never = [task for task, rate in rates.items() if rate == 0]
-    print(f"scripted grasp: mean {sum(rates.values()) / len(rates):.0%}, lowest "
-          f"{min(rates.values()):.0%}; never grasped: {', '.join(never) or 'none'}")
+    scripted = graspability(args.out, tasks, args.check_episodes, seed=args.seed,
+                            progress=lambda task, rate: print(f"{task}: scripted grasp {rate:.0%}", flush=True))
+    perturbed = graspability(args.out, tasks, args.perturbed_episodes, seed=args.seed, errors=GraspErrors(),
+                             progress=lambda task, rate: print(f"{task}: perturbed grasp {rate:.0%}", flush=True))
+    record_grasp_success(args.out, scripted, perturbed)
+    never = [task for task, rate in scripted.items() if rate == 0]
+    print(f"scripted grasp: mean {sum(scripted.values()) / len(scripted):.0%}, lowest "
+          f"{min(scripted.values()):.0%}; never grasped: {', '.join(never) or 'none'}")
+    print(f"perturbed grasp: mean {sum(perturbed.values()) / len(perturbed):.0%}, lowest "
+          f"{min(perturbed.values()):.0%}, highest {max(perturbed.values()):.0%}")
     return 1 if never else 0
 
 
 def cmd_assets_show(args: argparse.Namespace) -> int:
     from glocal_ros.objects import ObjectSetMetadata
 
+    def rate(value: float | None) -> str:
+        return "-" if value is None else f"{value:.0%}"
+
     metadata = ObjectSetMetadata.load(args.out)
     print(f"{'task':4} {'complexity':>10} {'difficulty':>10} {'extents (cm)':>18} {'mass (g)':>8} {'hulls':>5} "
-          f"{'scripted':>8}")
+          f"{'scripted':>8} {'perturbed':>9}")
     for task in sorted_tasks(metadata.objects):
         obj = metadata.objects[task]
         extents = "x".join(f"{100 * e:.1f}" for e in obj.extents)
-        scripted = "-" if obj.scripted_grasp_success is None else f"{obj.scripted_grasp_success:.0%}"
         print(f"{task:4} {obj.complexity:10.2f} {obj.difficulty:10.3f} {extents:>18} {1000 * obj.mass:8.0f} "
-              f"{obj.hull_count:5d} {scripted:>8}")
+              f"{obj.hull_count:5d} {rate(obj.scripted_grasp_success):>8} {rate(obj.perturbed_grasp_success):>9}")
     return 0
+
+
+def cmd_assets_validate(args: argparse.Namespace) -> int:
+    """The letter against perturbed and scripted grasp success, the prior's score and steps to B."""
+    from glocal_app.benches.assets import prior_scores, steps_to_b, validation_figure, validation_report
+    from glocal_app.benches.transfer import read_transfer_goals
+    from glocal_ros.objects import ObjectSetMetadata
+
+    metadata = ObjectSetMetadata.load(args.out)
+    transfer = []
+    if args.transfer:
+        try:
+            transfer = [goal for path in args.transfer for goal in read_transfer_goals(path, TransferSettings())
+                        if goal.recipe == args.recipe and goal.prior == INITIAL_POLICY]
+        except (OSError, ValueError) as error:
+            print(f"assets validate: {error}", file=sys.stderr)
+            return 1
+    tasks = sorted_tasks(metadata.objects)
+    measures = {
+        "perturbed": {t: o.perturbed_grasp_success for t, o in metadata.objects.items()
+                      if o.perturbed_grasp_success is not None},
+        "scripted": {t: o.scripted_grasp_success for t, o in metadata.objects.items()
+                     if o.scripted_grasp_success is not None},
+        "prior": prior_scores(args.out, tasks, args.episodes, seed=args.seed) if args.episodes else {},
+        "steps_to_b": steps_to_b(transfer),
+    }
+    figure = validation_figure(measures, args.report.with_suffix(".png"))
+    command = "glocal-ros " + " ".join(sys.argv[1:])
+    preamble = (f"Objects: `{args.out}` (generator {metadata.generator_version}, {metadata.source}). (a) and (b) "
+                f"from its `objects.json` (`glocal-ros assets check`); (c) {args.episodes} deterministic "
+                f"episodes of the shipped prior per object (seed {args.seed}), task bits it never trained on "
+                f"as the mean of the trained one; (d) goals of {', '.join(map(str, args.transfer or [])) or 'no'}"
+                f" transfer report ({args.recipe}). Figure: `{figure.name}`.")
+    return write_bench_report(validation_report(measures, command, preamble), args.report)
 
 
 def write_bench_report(report: str, out: Path) -> int:
@@ -218,7 +271,7 @@ def cmd_train_prior(args: argparse.Namespace) -> int:
 
     from learner_node.evaluation import evaluate
     from learner_node.policy_store import PolicyRecord, PolicyStore, check_name
-    from learner_node.prior import PriorConfig, train_prior
+    from learner_node.prior import train_prior
     from learner_node.replay_buffer import recent_experience
     from learner_node.sac_settings import EXPERIENCE_TRANSITIONS
     from sim_node.batch import BatchedEnvs
@@ -226,7 +279,7 @@ def cmd_train_prior(args: argparse.Namespace) -> int:
     from sim_node.scripted_grasp import ScriptedGraspPolicy
 
     check_name(args.name)
-    config = PriorConfig(max_steps=args.steps, seed=args.seed, network=args.network)
+    config = PriorConfig(max_steps=args.steps, min_steps=args.min_steps, seed=args.seed, network=args.network)
     bar = tqdm(total=config.max_steps, unit="step", desc="A0 prior")
 
     def progress(steps: int, success_rate: float) -> None:
@@ -306,22 +359,39 @@ def build_parser() -> argparse.ArgumentParser:
     generate.add_argument("--seed", type=int, default=0)
     generate.add_argument("--candidates", type=int, default=1500, help="candidate shapes to bin into the grid")
     generate.add_argument("--workers", type=int, default=2)
+    generate.add_argument("--grid", choices=("measured", "geometric"), default="measured",
+                          help="letters from grasps in the simulator, or from the geometric difficulty alone")
+    generate.add_argument("--per-column", type=int, default=None,
+                          help="candidates of each complexity digit tried in the simulator (--grid measured; "
+                               "default: glocal_ros.objects.MeasuredGrid's)")
     generate.set_defaults(func=cmd_assets_generate)
     egad = asset_commands.add_parser("import-egad", help="the same layout from EGAD's A0.obj .. G6.obj")
     egad.add_argument("egad_dir", type=Path)
     egad.add_argument("--partial", action="store_true", help="import whichever of the 49 files exist")
     egad.add_argument("--seed", type=int, default=0, help="seed of the scripted grasp check")
     egad.set_defaults(func=cmd_assets_import_egad)
-    check = asset_commands.add_parser("check", help="scripted grasp success of every object, into objects.json")
+    check = asset_commands.add_parser("check", help="scripted and perturbed grasp success of every object, into objects.json")
     check.add_argument("--seed", type=int, default=0)
     check.set_defaults(func=cmd_assets_check)
     show = asset_commands.add_parser("show", help="every object's metrics")
     show.set_defaults(func=cmd_assets_show)
-    for command in (generate, egad, check, show):
+    validate = asset_commands.add_parser(
+        "validate", help="Spearman between the letter and grasp success, the prior's score and steps to B")
+    validate.add_argument("--episodes", type=int, default=100, help="episodes of the prior per object (0: none)")
+    validate.add_argument("--seed", type=int, default=0)
+    validate.add_argument("--transfer", type=Path, nargs="*", help="bench transfer reports (default budget) "
+                          "whose goals give steps to B")
+    validate.add_argument("--recipe", default=DEFAULT_RECIPE, help="the transfer reports' recipe to use")
+    validate.add_argument("--report", type=Path, default=Path("bench/results/assets-validate.md"),
+                          help="the report; the figure is written beside it as .png")
+    validate.set_defaults(func=cmd_assets_validate)
+    for command in (generate, egad, check, show, validate):
         command.add_argument("--out", type=Path, default=None, help="objects directory (default: the package's)")
     for command in (generate, egad, check):
         command.add_argument("--check-episodes", type=int, default=30,
                              help="scripted grasp episodes per object (0: no check)")
+        command.add_argument("--perturbed-episodes", type=int, default=40,
+                             help="perturbed grasp episodes per object (and per candidate tried)")
 
     bench = commands.add_parser("bench", help="benchmarks; each writes its table with the command that made it")
     bench_commands = bench.add_subparsers(dest="bench_command", required=True)
@@ -378,7 +448,9 @@ def build_parser() -> argparse.ArgumentParser:
     bench_transfer.set_defaults(func=cmd_bench_transfer)
 
     prior = commands.add_parser("train-prior", help="train the A0 prior (resumable) and store it in assets/priors")
-    prior.add_argument("--steps", type=int, default=40_000, help="most SAC env steps")
+    prior.add_argument("--steps", type=int, default=PriorConfig.max_steps, help="most SAC env steps")
+    prior.add_argument("--min-steps", type=int, default=PriorConfig.min_steps,
+                       help="SAC env steps before the training success rate may stop it")
     prior.add_argument("--seed", type=int, default=0)
     prior.add_argument("--eval-episodes", type=int, default=100)
     prior.add_argument("--threshold", type=float, default=75, help="B: the prior must score above it")
@@ -431,6 +503,8 @@ def main(argv: list[str] | None = None) -> int:
         args.out = objects_dir()
     if args.command == "train-prior" and args.out is None:
         args.out = assets_dir() / "priors"
+    if args.command == "train-prior" and not 0 <= args.min_steps <= args.steps:
+        parser.error(f"train-prior: --min-steps {args.min_steps} must lie between 0 and --steps {args.steps}")
     if args.command == "collect-experience" and args.store is None:
         args.store = assets_dir() / "priors"
     try:

@@ -31,10 +31,12 @@ Demonstrator = Callable[[gym.Env], np.ndarray]
 class PriorConfig:
     task: str = "A0"
     demo_episodes: int = 50
-    max_steps: int = 40_000  # env steps of SAC training
+    max_steps: int = 100_000  # env steps of SAC training
     checkpoint_every: int = 5_000
     stop_success_rate: float = 0.95  # of the last 50 training episodes ...
-    min_steps: int = 15_000  # ... once at least this many steps are trained
+    # ... once at least this many steps are trained. The 64x64 prior passed the
+    # rate at 39k steps with 84/100 deterministic, and 100/100 at 60k and 80k.
+    min_steps: int = 60_000
     seed: int = 0
     network: str = DEFAULT_NETWORK  # of learner_node.sac_settings.NETWORKS
 

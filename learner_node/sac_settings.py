@@ -8,9 +8,11 @@ number of envs N, so N changes wall-clock, not sample efficiency.
 
 A ``Network`` (hidden layers of actor and critics, and the batch) is chosen
 when a model is made, that is when ``glocal-ros train-prior`` trains a
-prior: ``NETWORKS`` has the project's [256, 256] / 256 (what the grasp probe
-of ENVIRONMENT.md learned with) and the paper's Stable Baselines (SB2)
-defaults [64, 64] / 64. A Train goal continues a stored model, whose
+prior: ``NETWORKS`` has the paper's Stable Baselines (SB2) defaults [64, 64]
+/ 64, the default since ``bench learner`` and ``bench transfer`` measured it
+(a gradient step of a few ms, against 13-16 ms for [256, 256] on one
+thread; as good a prior, 100/100 on A0 from 60k steps), and [256, 256] / 256,
+what the grasp probe of ENVIRONMENT.md learned with. A Train goal continues a stored model, whose
 network, batch, gamma and learning rate are its own; ``FineTuning`` is
 what the goal chooses on top (SB3 leaves it to whoever loads a model): the
 batch, the learning rate, what its replay buffer starts with (SB3: nothing)
@@ -68,7 +70,7 @@ NETWORKS: dict[str, Network] = {
     "256x256": Network(hidden=(256, 256), batch_size=256),
     "64x64": Network(hidden=(64, 64), batch_size=64),  # SB2's SAC defaults, which the paper ran
 }
-DEFAULT_NETWORK = "256x256"
+DEFAULT_NETWORK = "64x64"
 
 
 def network(name: str) -> Network:

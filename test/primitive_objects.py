@@ -8,7 +8,7 @@ BOX_TASK, CYLINDER_TASK = "A0", "B3"
 
 
 def write_object(objects_dir: Path, task: str, geometry: str, inertia: tuple[float, float, float]) -> None:
-    """A 100 g single-link URDF with friction 1, as the asset generator writes them."""
+    """A 100 g single-link URDF with friction 1 (the generated objects have 0.5: these stay easy to grasp)."""
     ixx, iyy, izz = inertia
     (objects_dir / task).mkdir(parents=True, exist_ok=True)
     (objects_dir / task / "model.urdf").write_text(

@@ -58,3 +58,9 @@ def test_collect_experience_refuses_bad_input_without_a_traceback(tmp_path):
         result = run_cli("collect-experience", *args)
         assert result.returncode == 2 and message in result.stderr and "Traceback" not in result.stderr
     assert not (tmp_path / "prior").exists()
+
+
+def test_train_prior_refuses_a_minimum_above_its_budget_before_training():
+    result = run_cli("train-prior", "--min-steps", "5000", "--steps", "3000")
+    assert result.returncode == 2 and "--min-steps 5000 must lie between 0 and --steps 3000" in result.stderr
+    assert "Traceback" not in result.stderr

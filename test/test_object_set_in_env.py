@@ -39,11 +39,13 @@ def test_scripted_grasp_lifts_every_object(env, task):
     assert scripted_success_rate(env, task, episodes=3, seed=0) > 0
 
 
-def test_metadata_records_the_graspability_check():
+def test_metadata_records_both_grasp_checks():
     metadata = ObjectSetMetadata.load(objects_dir())
-    rates = {task: obj.scripted_grasp_success for task, obj in metadata.objects.items()}
-    assert set(rates) == set(ALL_TASKS)
-    assert all(rate is not None and rate > 0 for rate in rates.values()), rates
+    scripted = {task: obj.scripted_grasp_success for task, obj in metadata.objects.items()}
+    perturbed = {task: obj.perturbed_grasp_success for task, obj in metadata.objects.items()}
+    assert set(scripted) == set(perturbed) == set(ALL_TASKS)
+    assert all(rate is not None and rate > 0 for rate in scripted.values()), scripted
+    assert all(rate is not None and 0 <= rate <= 1 for rate in perturbed.values()), perturbed
 
 
 def test_assets_show_lists_every_object():

@@ -17,8 +17,10 @@ import trimesh
 from glocal_ros.objects import (
     GRIPPER_FIT_FRACTION,
     GRIPPER_WIDTH,
+    BadMeshError,
     GeneratorConfig,
     GridAssignmentError,
+    MeasuredGrid,
     MissingEgadFilesError,
     ObjectSetMetadata,
     assign_grid,
@@ -26,9 +28,10 @@ from glocal_ros.objects import (
     grasp_difficulty,
     import_egad,
     morphological_complexity,
-    record_scripted_grasp_success,
+    record_grasp_success,
     sample_candidates,
 )
+from glocal_ros.objects.grid import assign_measured_grid, shortlist
 from glocal_ros.objects.meshing import prepare_for_gripper
 from glocal_ros.objects.metrics import angular_deficits
 from glocal_ros.objects.pipeline import candidate_mesh
@@ -107,6 +110,27 @@ def test_assign_grid_fills_every_cell_in_order() -> None:
         assign_grid(complexity[:40], difficulty[:40])
 
 
+def test_measured_grid_spreads_each_column_from_its_easiest_to_its_hardest() -> None:
+    rng = np.random.default_rng(2)
+    complexity, difficulty = rng.random(300), rng.random(300)
+    columns, edges = shortlist(complexity, difficulty, 12)
+    assert all(len(members) == 12 for members in columns.values())
+    assert all(np.all(np.diff(difficulty[members]) >= 0) for members in columns.values())
+    assert assign_grid(complexity, difficulty).complexity_edges == edges
+    success = {m: float(rng.random()) for members in columns.values() for m in members}
+    unusable = columns["3"][0]
+    del success[unusable]  # e.g. its scripted grasp failed
+    cells = assign_measured_grid(columns, success, edges).cells
+    assert sorted(cells) == sorted(ALL_TASKS) and unusable not in cells.values()
+    for digit, members in columns.items():
+        column = [success[cells[letter + digit]] for letter in "ABCDEFG"]
+        assert np.all(np.diff(column) < 0), column
+        usable = [success[m] for m in members if m in success]
+        assert (column[0], column[-1]) == (max(usable), min(usable))
+    with pytest.raises(GridAssignmentError, match="column 3"):
+        assign_measured_grid(columns, {m: v for m, v in success.items() if m not in columns["3"][:6]}, edges)
+
+
 def test_candidates_are_deterministic() -> None:
     first = sample_candidates(seed=7, candidates=4, config=FAST)
     again = sample_candidates(seed=7, candidates=4, config=FAST)
@@ -157,14 +181,47 @@ def test_import_egad_builds_same_layout(tmp_path: Path) -> None:
     assert ObjectSetMetadata.load(tmp_path / "out").source == "egad"
 
 
-def test_record_scripted_grasp_success(small_set: tuple[Path, ObjectSetMetadata], tmp_path: Path) -> None:
+def test_import_egad_refuses_bad_meshes_and_leaves_the_output_as_it_was(tmp_path: Path) -> None:
+    src, out = tmp_path / "egad", tmp_path / "out"
+    src.mkdir()
+    _, mesh = candidate_mesh(11, 0, FAST)
+    mesh.export(src / "A0.obj")
+    import_egad(src, out, config=FAST, require_all=False, contact_sheet=False)
+    before = {path: path.read_bytes() for path in out.rglob("*") if path.is_file()}
+    open_box = trimesh.creation.box((0.03, 0.04, 0.05))
+    open_box.update_faces(np.arange(len(open_box.faces)) >= 6)  # three sides gone: too big a hole to fill
+    bad = {"empty": "", "open": open_box.export(file_type="obj"), "flat": "v 0 0 0\nv 1 0 0\nv 0 1 0\nf 1 2 3\n"}
+    for kind, text in bad.items():
+        (src / "B2.obj").write_text(text)
+        with pytest.raises(BadMeshError, match="B2.obj"):
+            import_egad(src, out, config=FAST, require_all=False, contact_sheet=False)
+        assert {path: path.read_bytes() for path in out.rglob("*") if path.is_file()} == before, kind
+        assert {entry.name for entry in tmp_path.iterdir()} == {"egad", "out"}, "a staging directory was left"
+
+
+def test_a_measured_grid_orders_letters_by_the_grasp_trial(tmp_path: Path) -> None:
+    def thinner_is_easier(objects: Path, task: str, seed: int) -> tuple[float, float]:
+        # A deterministic stand-in for the simulator's trial: success falls with the object's narrowest width.
+        width = min(np.ptp(_obj_vertices(objects / task / "visual.obj"), axis=0))
+        return float(np.clip(1.0 - width / 0.064, 0, 1)), 1.0
+
+    metadata = generate_object_set(tmp_path, seed=3, candidates=70, config=FAST, tasks=["A2", "D2", "G2"],
+                                   measured=MeasuredGrid(thinner_is_easier, per_column=7), contact_sheet=False)
+    success = [metadata.objects[task].perturbed_grasp_success for task in ("A2", "D2", "G2")]
+    assert success[0] > success[1] > success[2]
+    assert metadata.binning["per_column"] == 7 and len(metadata.binning["trials"]) == 49
+    assert ObjectSetMetadata.load(tmp_path) == metadata
+
+
+def test_record_grasp_success(small_set: tuple[Path, ObjectSetMetadata], tmp_path: Path) -> None:
     out, _ = small_set
     shutil.copy(out / "objects.json", tmp_path / "objects.json")
-    updated = record_scripted_grasp_success(tmp_path, {"A0": 0.9})
-    assert updated.objects["A0"].scripted_grasp_success == 0.9
-    assert updated.objects["G6"].scripted_grasp_success is None
+    updated = record_grasp_success(tmp_path, scripted={"A0": 0.9}, perturbed={"G6": 0.25})
+    assert (updated.objects["A0"].scripted_grasp_success, updated.objects["A0"].perturbed_grasp_success) == (0.9, None)
+    assert (updated.objects["G6"].scripted_grasp_success, updated.objects["G6"].perturbed_grasp_success) == (None, 0.25)
+    assert ObjectSetMetadata.load(tmp_path) == updated
     with pytest.raises(KeyError):
-        record_scripted_grasp_success(tmp_path, {"B1": 1.0})
+        record_grasp_success(tmp_path, perturbed={"B1": 1.0})
 
 
 # --- the committed set under assets/objects ---------------------------------
@@ -191,12 +248,14 @@ def test_committed_set_is_complete_and_small(committed: ObjectSetMetadata) -> No
 
 def test_committed_grid_follows_metrics(committed: ObjectSetMetadata) -> None:
     edges = committed.binning["complexity_edges"]
+    trials = committed.binning["trials"]  # candidate index -> (perturbed, scripted) success when it was chosen
     for task, obj in committed.objects.items():
         difficulty_row, complexity_col = grid_coordinates(task)
         assert np.searchsorted(edges, obj.complexity, side="right") == complexity_col
+        assert trials[str(obj.candidate_index)][1] >= committed.binning["min_scripted_success"]
         if difficulty_row > 0:
             easier = committed.objects["ABCDEFG"[difficulty_row - 1] + task[1]]
-            assert easier.difficulty <= obj.difficulty
+            assert trials[str(easier.candidate_index)][0] >= trials[str(obj.candidate_index)][0]
         assert 0.0 < obj.difficulty <= 1.0
         assert 0.05 <= obj.mass <= 0.15
         assert obj.visual_faces <= 1500 and 1 <= obj.hull_count <= 8

@@ -6,7 +6,7 @@ ROS-free. Main entry points:
   collision.obj}``, ``objects.json`` and ``contact_sheet.png``;
 - :func:`import_egad` builds the same layout from EGAD's ``A0.obj`` .. ``G6.obj``;
 - :func:`render_contact_sheet` renders a 7x7 overview of an objects directory;
-- :func:`record_scripted_grasp_success` stores a graspability check in ``objects.json``.
+- :func:`record_grasp_success` stores the simulator's grasp checks in ``objects.json``.
 
 Load a task with ``p.loadURDF(str(objects_dir / task / "model.urdf"),
 flags=p.URDF_USE_INERTIA_FROM_FILE)``; the link frame is the object's centre
@@ -19,14 +19,17 @@ from glocal_ros.objects.metadata import (
     METADATA_FILE,
     ObjectMetadata,
     ObjectSetMetadata,
-    record_scripted_grasp_success,
+    record_grasp_success,
 )
 from glocal_ros.objects.metrics import GraspDifficulty, grasp_difficulty, morphological_complexity
 from glocal_ros.objects.physics import FrictionConfig, MassConfig, VhacdConfig
 from glocal_ros.objects.pipeline import (
     GENERATOR_VERSION,
+    BadMeshError,
     CandidateMetrics,
     GeneratorConfig,
+    GraspTrial,
+    MeasuredGrid,
     MissingEgadFilesError,
     ProgressCallback,
     generate_object_set,
@@ -37,16 +40,19 @@ from glocal_ros.objects.render import render_contact_sheet
 
 __all__ = [
     "GENERATOR_VERSION",
+    "BadMeshError",
     "GRIPPER_FIT_FRACTION",
     "GRIPPER_WIDTH",
     "METADATA_FILE",
     "CandidateMetrics",
     "FrictionConfig",
     "GeneratorConfig",
+    "GraspTrial",
     "GraspDifficulty",
     "GridAssignment",
     "GridAssignmentError",
     "MassConfig",
+    "MeasuredGrid",
     "MissingEgadFilesError",
     "ObjectMetadata",
     "ObjectSetMetadata",
@@ -57,7 +63,7 @@ __all__ = [
     "grasp_difficulty",
     "import_egad",
     "morphological_complexity",
-    "record_scripted_grasp_success",
+    "record_grasp_success",
     "render_contact_sheet",
     "sample_candidates",
 ]

@@ -7,6 +7,8 @@ from dataclasses import asdict, dataclass, field, fields
 from pathlib import Path
 from typing import Any, Mapping, Optional
 
+from glocal_ros.files import atomic_write
+
 METADATA_FILE = "objects.json"
 
 
@@ -37,8 +39,10 @@ class ObjectMetadata:
     candidate_index: Optional[int] = None
     source_file: Optional[str] = None
     generator_params: Optional[dict[str, Any]] = None
-    # Filled by the scripted-grasp check (see record_scripted_grasp_success).
+    # Measured in the simulator (see record_grasp_success): the share of episodes in which the scripted grasp
+    # (exact, with retries) and a single perturbed grasp lift the object.
     scripted_grasp_success: Optional[float] = None
+    perturbed_grasp_success: Optional[float] = None
 
 
 @dataclass
@@ -60,7 +64,8 @@ class ObjectSetMetadata:
     def save(self, objects_dir: Path) -> Path:
         """Write ``<objects_dir>/objects.json`` and return its path."""
         path = Path(objects_dir) / METADATA_FILE
-        path.write_text(json.dumps(self.to_dict(), indent=1) + "\n")
+        text = (json.dumps(self.to_dict(), indent=1) + "\n").encode()
+        atomic_write(path, lambda stream: stream.write(text))
         return path
 
     @classmethod
@@ -72,16 +77,18 @@ class ObjectSetMetadata:
         return cls(objects=objects, **{k: v for k, v in data.items() if k in known})
 
 
-def record_scripted_grasp_success(objects_dir: Path, success_rates: Mapping[str, float]) -> ObjectSetMetadata:
-    """Store scripted-controller success rates (0..1) per task in ``objects.json``.
+def record_grasp_success(objects_dir: Path, scripted: Mapping[str, float] = {},
+                         perturbed: Mapping[str, float] = {}) -> ObjectSetMetadata:
+    """Store success rates (0..1) per task in ``objects.json``: of the scripted grasp and of the perturbed one.
 
-    The hook for the graspability check run by the controller's owner; tasks
-    not in ``success_rates`` keep their current value.
+    The hook for the simulator's checks (``glocal-ros assets check``); tasks
+    not given keep their current values.
     """
     metadata = ObjectSetMetadata.load(objects_dir)
-    for task, rate in success_rates.items():
-        if task not in metadata.objects:
-            raise KeyError(f"task {task!r} is not in {Path(objects_dir) / METADATA_FILE}")
-        metadata.objects[task].scripted_grasp_success = float(rate)
+    for rates, name in ((scripted, "scripted_grasp_success"), (perturbed, "perturbed_grasp_success")):
+        for task, rate in rates.items():
+            if task not in metadata.objects:
+                raise KeyError(f"task {task!r} is not in {Path(objects_dir) / METADATA_FILE}")
+            setattr(metadata.objects[task], name, float(rate))
     metadata.save(objects_dir)
     return metadata

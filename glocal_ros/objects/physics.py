@@ -14,6 +14,7 @@ import pybullet as p
 import trimesh
 
 from glocal_ros.objects.meshing import write_obj
+from glocal_ros.objects.metrics import FRICTION_COEFFICIENT
 
 
 @dataclass(frozen=True)
@@ -29,9 +30,17 @@ class MassConfig:
 
 @dataclass(frozen=True)
 class FrictionConfig:
-    """Contact parameters written into the URDF ``<contact>`` block."""
+    """Contact parameters written into the URDF ``<contact>`` block.
 
-    lateral: float = 1.0
+    Bullet's friction at a contact is the product of the two bodies'
+    coefficients, and the Panda's fingers have 1.0 (pybullet_data's
+    panda.urdf), so the object's ``lateral`` is the grasp's mu: the grasp
+    metric's (``FRICTION_COEFFICIENT``), so that a grasp the metric counts
+    outside the friction cone slips in the simulator too. (Until generator
+    2.0.0 it was 1.0, and almost any grasp held.)
+    """
+
+    lateral: float = FRICTION_COEFFICIENT
     spinning: float = 0.001
     rolling: float = 0.0001
 

@@ -3,20 +3,36 @@
 Each task directory holds ``model.urdf``, ``visual.obj`` (decimated) and
 ``collision.obj`` (V-HACD hulls); ``<out_dir>/objects.json`` holds the
 metrics (see :mod:`glocal_ros.objects.metadata`).
+
+Everything is written to a staging directory beside ``out_dir`` and moved
+into it at the end, so a failure leaves ``out_dir`` as it was.
+
+The letter is either the geometric difficulty (``assign_grid``) or, given a
+``MeasuredGrid``, what the simulator measures (``assign_measured_grid``): the
+simulator is passed in as a ``GraspTrial``, so this package does not import it.
 """
 
 from __future__ import annotations
 
 import concurrent.futures
+import contextlib
+import shutil
+import tempfile
 from dataclasses import asdict, dataclass, field
 from pathlib import Path
-from typing import Callable, Optional, Sequence
+from typing import Callable, Iterator, Optional, Sequence
 
 import numpy as np
 import trimesh
 
 from glocal_ros.objects.cppn import CPPNParams, evaluate_field, sample_cppn, solid_bounds
-from glocal_ros.objects.grid import BINNING_METHOD, assign_grid
+from glocal_ros.objects.grid import (
+    BINNING_METHOD,
+    MEASURED_BINNING_METHOD,
+    assign_grid,
+    assign_measured_grid,
+    shortlist,
+)
 from glocal_ros.objects.meshing import (
     GRIPPER_FIT_FRACTION,
     GRIPPER_WIDTH,
@@ -47,10 +63,28 @@ from glocal_ros.objects.physics import (
 from glocal_ros.objects.render import render_contact_sheet
 from glocal_ros.tasks import ALL_TASKS, validate_tasks
 
-GENERATOR_VERSION = "1.0.0"
+GENERATOR_VERSION = "2.0.0"
 
-#: ``progress(stage, done, total)``; stages are "candidates" and "objects".
+#: ``progress(stage, done, total)``; stages are "candidates", "grasp trials" and "objects".
 ProgressCallback = Callable[[str, int, int], None]
+
+#: ``grasp_trial(objects_dir, task, seed)``: (perturbed-grasp success, scripted-grasp success), 0..1, of
+#: the object of ``task`` in ``objects_dir``, measured in the simulator; a function of ``seed``.
+GraspTrial = Callable[[Path, str, int], tuple[float, float]]
+
+
+@dataclass(frozen=True)
+class MeasuredGrid:
+    """Letters from grasps in the simulator (``grid.MEASURED_BINNING_METHOD``).
+
+    ``per_column`` candidates of each complexity digit are built and tried;
+    those whose scripted grasp succeeds less than ``min_scripted_success``
+    never enter the grid, so every object stays graspable.
+    """
+
+    grasp_trial: GraspTrial
+    per_column: int = 32
+    min_scripted_success: float = 0.8
 
 
 @dataclass(frozen=True)
@@ -201,6 +235,61 @@ def _write_object(
     )
 
 
+@contextlib.contextmanager
+def staged(out_dir: Path) -> Iterator[Path]:
+    """A staging directory beside ``out_dir`` whose entries replace ``out_dir``'s of the same name once
+    the block ends without an error; otherwise ``out_dir`` is left as it was. Removed either way."""
+    out_dir = Path(out_dir)
+    out_dir.parent.mkdir(parents=True, exist_ok=True)
+    staging = Path(tempfile.mkdtemp(dir=out_dir.parent, prefix=f".{out_dir.name}.staging-"))
+    try:
+        yield staging
+        out_dir.mkdir(exist_ok=True)
+        for entry in sorted(staging.iterdir()):
+            target = out_dir / entry.name
+            if target.is_dir() and not target.is_symlink():
+                shutil.rmtree(target)
+            entry.replace(target)
+    finally:
+        shutil.rmtree(staging, ignore_errors=True)
+
+
+def _trial_candidate(seed: int, index: int, config: GeneratorConfig, grasp_trial: GraspTrial,
+                     work_dir: Path) -> tuple[int, float, float]:
+    """Build candidate ``index`` as task A0 of a scratch objects directory and try grasping it."""
+    _, mesh = candidate_mesh(seed, index, config)
+    objects = work_dir / f"candidate-{index}"
+    _write_object("A0", _measure(mesh, _candidate_rngs(seed, index)[1], config), objects, config,
+                  source="generated", seed=seed, candidate_index=index)
+    try:
+        return (index, *grasp_trial(objects, "A0", seed * 100_003 + index))
+    finally:
+        shutil.rmtree(objects, ignore_errors=True)
+
+
+def _trial_star(args: tuple) -> tuple[int, float, float]:
+    return _trial_candidate(*args)
+
+
+def trial_candidates(seed: int, indices: Sequence[int], config: GeneratorConfig, grasp_trial: GraspTrial,
+                     work_dir: Path, workers: int = 1,
+                     progress: Optional[ProgressCallback] = None) -> dict[int, tuple[float, float]]:
+    """(perturbed, scripted) grasp success of each candidate in ``indices``."""
+    jobs = [(seed, index, config, grasp_trial, work_dir) for index in indices]
+    results: dict[int, tuple[float, float]] = {}
+    with contextlib.ExitStack() as stack:
+        if workers > 1:
+            pool = stack.enter_context(concurrent.futures.ProcessPoolExecutor(max_workers=workers))
+            outcomes = pool.map(_trial_star, jobs)
+        else:
+            outcomes = map(_trial_star, jobs)
+        for index, perturbed, scripted in outcomes:
+            results[index] = (perturbed, scripted)
+            if progress:
+                progress("grasp trials", len(results), len(jobs))
+    return results
+
+
 def generate_object_set(
     out_dir: Path,
     seed: int = 0,
@@ -210,6 +299,7 @@ def generate_object_set(
     workers: int = 1,
     tasks: Optional[Sequence[str]] = None,
     contact_sheet: bool = True,
+    measured: Optional[MeasuredGrid] = None,
 ) -> ObjectSetMetadata:
     """Generate a seeded candidate pool, bin it on the grid and write the chosen objects.
 
@@ -223,47 +313,87 @@ def generate_object_set(
     :param tasks: write only these tasks (the grid is still chosen from the
         whole pool); ``objects.json`` then lists only them.
     :param contact_sheet: also render ``<out_dir>/contact_sheet.png``.
+    :param measured: choose letters by grasps in the simulator rather than by the geometric difficulty.
     """
-    out_dir = Path(out_dir)
     chosen_tasks = validate_tasks(tasks) if tasks is not None else list(ALL_TASKS)
     pool = sample_candidates(seed, candidates, config, workers, progress)
     valid = [m for m in pool if m is not None and m.antipodal_fraction >= config.min_antipodal_fraction]
-    grid = assign_grid([m.complexity for m in valid], [m.difficulty for m in valid])
-
-    metadata = ObjectSetMetadata(
-        generator_version=GENERATOR_VERSION,
-        source="generated",
-        config=config.to_dict(),
-        binning={"method": BINNING_METHOD, "complexity_edges": grid.complexity_edges},
-        seed=seed,
-        candidates=candidates,
-        valid_candidates=len(valid),
-    )
-    out_dir.mkdir(parents=True, exist_ok=True)
-    for done, task in enumerate(chosen_tasks, start=1):
-        index = valid[grid.cells[task]].index
-        params, mesh = candidate_mesh(seed, index, config)
-        measured = _measure(mesh, _candidate_rngs(seed, index)[1], config)
-        metadata.objects[task] = _write_object(
-            task,
-            measured,
-            out_dir,
-            config,
+    complexity, difficulty = [m.complexity for m in valid], [m.difficulty for m in valid]
+    with staged(out_dir) as staging:
+        trials: dict[int, tuple[float, float]] = {}
+        if measured is None:
+            grid, binning = assign_grid(complexity, difficulty), {"method": BINNING_METHOD}
+        else:
+            columns, edges = shortlist(complexity, difficulty, measured.per_column)
+            tried = [valid[i].index for members in columns.values() for i in members]
+            with tempfile.TemporaryDirectory() as scratch:
+                trials = trial_candidates(seed, tried, config, measured.grasp_trial, Path(scratch), workers,
+                                          progress)
+            success = {i: trials[valid[i].index][0] for members in columns.values() for i in members
+                       if trials[valid[i].index][1] >= measured.min_scripted_success}
+            grid = assign_measured_grid(columns, success, edges)
+            binning = {"method": MEASURED_BINNING_METHOD, "per_column": measured.per_column,
+                       "min_scripted_success": measured.min_scripted_success,
+                       "trials": {str(index): list(rates) for index, rates in sorted(trials.items())}}
+        metadata = ObjectSetMetadata(
+            generator_version=GENERATOR_VERSION,
             source="generated",
+            config=config.to_dict(),
+            binning={**binning, "complexity_edges": grid.complexity_edges},
             seed=seed,
-            candidate_index=index,
-            generator_params=params.to_dict(),
+            candidates=candidates,
+            valid_candidates=len(valid),
         )
-        if progress:
-            progress("objects", done, len(chosen_tasks))
-    metadata.save(out_dir)
-    if contact_sheet:
-        render_contact_sheet(out_dir, out_dir / "contact_sheet.png")
+        for done, task in enumerate(chosen_tasks, start=1):
+            index = valid[grid.cells[task]].index
+            params, mesh = candidate_mesh(seed, index, config)
+            perturbed, scripted = trials.get(index, (None, None))
+            metadata.objects[task] = _write_object(
+                task,
+                _measure(mesh, _candidate_rngs(seed, index)[1], config),
+                staging,
+                config,
+                source="generated",
+                seed=seed,
+                candidate_index=index,
+                generator_params=params.to_dict(),
+                perturbed_grasp_success=perturbed,
+                scripted_grasp_success=scripted,
+            )
+            if progress:
+                progress("objects", done, len(chosen_tasks))
+        metadata.save(staging)
+        if contact_sheet:
+            render_contact_sheet(staging, staging / "contact_sheet.png")
     return metadata
 
 
 class MissingEgadFilesError(FileNotFoundError):
     """The EGAD directory lacks some of the A0.obj..G6.obj files."""
+
+
+class BadMeshError(ValueError):
+    """A mesh given to the importer cannot become an object; the message names its file."""
+
+
+def load_mesh(path: Path) -> trimesh.Trimesh:
+    """A closed, outward-facing mesh from ``path`` (holes filled); ``BadMeshError`` naming the file if it is
+    empty, cannot be closed, or has no volume to scale into the gripper."""
+    try:
+        mesh = trimesh.load(path, force="mesh", process=True)
+    except Exception as error:  # trimesh raises whatever its parsers raise
+        raise BadMeshError(f"{path}: cannot be read as a mesh ({error})") from error
+    if len(mesh.faces) == 0:
+        raise BadMeshError(f"{path}: the mesh is empty")
+    if not mesh.is_watertight:
+        trimesh.repair.fill_holes(mesh)
+        if not mesh.is_watertight:
+            raise BadMeshError(f"{path}: the mesh is not watertight, and filling its holes did not close it")
+    if mesh.volume < 0:
+        mesh.invert()
+    if not mesh.volume > 0 or min(mesh.extents) <= 0:
+        raise BadMeshError(f"{path}: the mesh encloses no volume, so it cannot be scaled into the gripper")
+    return mesh
 
 
 def import_egad(
@@ -279,7 +409,11 @@ def import_egad(
     Each mesh goes through the generator's steps: complexity on the mesh as
     given (EGAD's own marching-cubes mesh), decimation, EGAD gripper scaling,
     grasp difficulty, V-HACD, URDF and metadata. The task is the file name;
-    EGAD's grid placement is kept, and the measured metrics are recorded.
+    EGAD's grid placement is kept, and the measured metrics are recorded (the
+    simulator's grasp checks are ``glocal-ros assets check``, which
+    ``assets import-egad`` runs after it). Every mesh is checked before
+    anything is written: a ``BadMeshError`` names the first bad file, and
+    ``out_dir`` stays as it was.
 
     :param require_all: raise :class:`MissingEgadFilesError` unless all 49 files exist;
         if False, import whichever of them exist (at least one).
@@ -289,27 +423,23 @@ def import_egad(
     missing = [task for task in ALL_TASKS if task not in found]
     if (require_all and missing) or not found:
         raise MissingEgadFilesError(f"{src_dir}: missing {', '.join(missing)}")
+    meshes = {task: load_mesh(path) for task, path in found.items()}
     metadata = ObjectSetMetadata(
         generator_version=GENERATOR_VERSION,
         source="egad",
         config=config.to_dict(),
         binning={"method": "EGAD evaluation-set file names (A0..G6) as published"},
     )
-    out_dir.mkdir(parents=True, exist_ok=True)
-    for done, (task, path) in enumerate(found.items(), start=1):
-        mesh = trimesh.load(path, force="mesh", process=True)
-        if not mesh.is_watertight:
-            trimesh.repair.fill_holes(mesh)
-        if mesh.volume < 0:
-            mesh.invert()
-        # Seeded by the grid position, so a re-import gives the same metrics.
-        measured = _measure(mesh, np.random.default_rng([ALL_TASKS.index(task), 1]), config)
-        metadata.objects[task] = _write_object(
-            task, measured, out_dir, config, source="egad", source_file=path.name
-        )
-        if progress:
-            progress("objects", done, len(found))
-    metadata.save(out_dir)
-    if contact_sheet:
-        render_contact_sheet(out_dir, out_dir / "contact_sheet.png")
+    with staged(out_dir) as staging:
+        for done, (task, mesh) in enumerate(meshes.items(), start=1):
+            # Seeded by the grid position, so a re-import gives the same metrics.
+            measured = _measure(mesh, np.random.default_rng([ALL_TASKS.index(task), 1]), config)
+            metadata.objects[task] = _write_object(
+                task, measured, staging, config, source="egad", source_file=found[task].name
+            )
+            if progress:
+                progress("objects", done, len(found))
+        metadata.save(staging)
+        if contact_sheet:
+            render_contact_sheet(staging, staging / "contact_sheet.png")
     return metadata

@@ -1,0 +1,59 @@
+"""`glocal-ros assets validate`: the letter against measured grasp success, the prior's score, steps to B."""
+
+import math
+import subprocess
+import sys
+
+import pytest
+
+from conftest import REPO
+from glocal_app.benches.assets import letter_correlation, prior_scores, validation_report
+from glocal_ros.paths import objects_dir
+from glocal_ros.tasks import ALL_TASKS
+
+TRANSFER_REPORT = REPO / "bench" / "results" / "transfer-task-inputs.md"
+
+
+def test_letter_correlation_is_spearman_over_the_letter_index() -> None:
+    falling = {task: 1.0 - "ABCDEFG".index(task[0]) / 10 + int(task[1]) / 1000 for task in ALL_TASKS}
+    rho, count = letter_correlation(falling)
+    assert count == 49 and -1.0 <= rho < -0.95
+    too_few, all_equal = letter_correlation({"A0": 1.0, "G0": 0.0}), letter_correlation({"A0": 5, "D0": 5, "G0": 5})
+    assert math.isnan(too_few[0]) and too_few[1] == 2 and math.isnan(all_equal[0]) and all_equal[1] == 3
+
+
+def test_the_report_has_a_correlation_per_measure_and_counts_never_as_slowest() -> None:
+    measures = {"perturbed": {"A0": 0.9, "D0": 0.5, "G0": 0.1}, "steps_to_b": {"A0": 0.0, "D0": 500.0,
+                                                                            "G0": math.inf},
+                "scripted": {"A0": 1.0, "D0": 1.0, "G0": 1.0}}
+    report = validation_report(measures, "glocal-ros assets validate", "preamble")
+    assert "| perturbed grasp | 3 | -1.00 | easier |" in report and "| scripted grasp | 3 | - (all equal) |" in report
+    assert "| steps to B | 3 | 1.00 | harder |" in report
+    assert "| G0 | 10% | 100% | never |" in report and "A0 prior" not in report
+
+
+def test_the_prior_is_scored_on_each_object_it_is_given() -> None:
+    scores = prior_scores(objects_dir(), ["A0", "G6"], episodes=2, seed=0)
+    assert set(scores) == {"A0", "G6"} and all(score in (0.0, 0.5, 1.0) for score in scores.values())
+
+
+def run_validate(*args: str) -> subprocess.CompletedProcess:
+    return subprocess.run([sys.executable, "-m", "glocal_app.cli", "assets", "validate", *args],
+                          capture_output=True, text=True, timeout=300, cwd=REPO)
+
+
+def test_validate_writes_the_table_and_the_figure_from_a_transfer_report(tmp_path) -> None:
+    report = tmp_path / "validate.md"
+    result = run_validate("--episodes", "0", "--transfer", str(TRANSFER_REPORT), "--report", str(report))
+    assert result.returncode == 0, result.stderr
+    text = report.read_text()
+    assert "| perturbed grasp | 49 |" in text and "| scripted grasp | 49 |" in text
+    assert "| steps to B | 8 |" in text and "Command: `glocal-ros assets validate --episodes 0" in text
+    assert report.with_suffix(".png").stat().st_size > 10_000
+
+
+def test_validate_refuses_a_file_that_is_no_transfer_report(tmp_path) -> None:
+    result = run_validate("--episodes", "0", "--transfer", str(REPO / "README.md"), "--report",
+                          str(tmp_path / "validate.md"))
+    assert result.returncode == 1 and "README.md" in result.stderr and "Traceback" not in result.stderr
+    assert not (tmp_path / "validate.md").exists()
