@@ -96,6 +96,17 @@ def add_graph_arguments(parser: argparse.ArgumentParser) -> None:
                              "curriculum's timeouts stay wall-clock")
 
 
+def _count(minimum: int):
+    """An argparse type: an integer of at least ``minimum``."""
+    def parse(text: str) -> int:
+        value = int(text)
+        if value < minimum:
+            raise argparse.ArgumentTypeError(f"{value} is below {minimum}")
+        return value
+    parse.__name__ = "int"  # argparse names the type in its message: "invalid int value"
+    return parse
+
+
 def _progress(stage: str, done: int, total: int) -> None:
     if done == total or done % max(1, total // 20) == 0:
         print(f"{stage}: {done}/{total}", flush=True)
@@ -361,7 +372,7 @@ def build_parser() -> argparse.ArgumentParser:
     generate.add_argument("--workers", type=int, default=2)
     generate.add_argument("--grid", choices=("measured", "geometric"), default="measured",
                           help="letters from grasps in the simulator, or from the geometric difficulty alone")
-    generate.add_argument("--per-column", type=int, default=None,
+    generate.add_argument("--per-column", type=_count(7), default=None,
                           help="candidates of each complexity digit tried in the simulator (--grid measured; "
                                "default: glocal_ros.objects.MeasuredGrid's)")
     generate.set_defaults(func=cmd_assets_generate)
@@ -370,14 +381,16 @@ def build_parser() -> argparse.ArgumentParser:
     egad.add_argument("--partial", action="store_true", help="import whichever of the 49 files exist")
     egad.add_argument("--seed", type=int, default=0, help="seed of the scripted grasp check")
     egad.set_defaults(func=cmd_assets_import_egad)
-    check = asset_commands.add_parser("check", help="scripted and perturbed grasp success of every object, into objects.json")
+    check = asset_commands.add_parser("check", help="scripted and perturbed grasp success of every object, into "
+                                      "objects.json")
     check.add_argument("--seed", type=int, default=0)
     check.set_defaults(func=cmd_assets_check)
     show = asset_commands.add_parser("show", help="every object's metrics")
     show.set_defaults(func=cmd_assets_show)
     validate = asset_commands.add_parser(
         "validate", help="Spearman between the letter and grasp success, the prior's score and steps to B")
-    validate.add_argument("--episodes", type=int, default=100, help="episodes of the prior per object (0: none)")
+    validate.add_argument("--episodes", type=_count(0), default=100,
+                          help="episodes of the prior per object (0: none)")
     validate.add_argument("--seed", type=int, default=0)
     validate.add_argument("--transfer", type=Path, nargs="*", help="bench transfer reports (default budget) "
                           "whose goals give steps to B")
@@ -388,9 +401,9 @@ def build_parser() -> argparse.ArgumentParser:
     for command in (generate, egad, check, show, validate):
         command.add_argument("--out", type=Path, default=None, help="objects directory (default: the package's)")
     for command in (generate, egad, check):
-        command.add_argument("--check-episodes", type=int, default=30,
+        command.add_argument("--check-episodes", type=_count(0), default=30,
                              help="scripted grasp episodes per object (0: no check)")
-        command.add_argument("--perturbed-episodes", type=int, default=40,
+        command.add_argument("--perturbed-episodes", type=_count(1), default=40,
                              help="perturbed grasp episodes per object (and per candidate tried)")
 
     bench = commands.add_parser("bench", help="benchmarks; each writes its table with the command that made it")
@@ -503,6 +516,8 @@ def main(argv: list[str] | None = None) -> int:
         args.out = objects_dir()
     if args.command == "train-prior" and args.out is None:
         args.out = assets_dir() / "priors"
+    if args.command == "assets" and args.assets_command == "check" and args.check_episodes < 1:
+        parser.error("assets check: --check-episodes must be at least 1")
     if args.command == "train-prior" and not 0 <= args.min_steps <= args.steps:
         parser.error(f"train-prior: --min-steps {args.min_steps} must lie between 0 and --steps {args.steps}")
     if args.command == "collect-experience" and args.store is None:

@@ -89,8 +89,8 @@ class ScriptedGraspPolicy:
     object's narrowest horizontal span, turned across it, staying
     ``hover_clearance`` above the object until aligned, then descends to the
     grasp height (half the object's height, not below the env's lowest TCP
-    height), or until its descent stalls on the object. CLOSE holds still for ``close_steps`` steps while the fingers
-    close; LIFT raises the TCP. A close that ends without touching the object,
+    height) or until its descent stalls on the object. CLOSE holds still
+    for ``close_steps`` steps while the fingers close; LIFT raises the TCP. A close that ends without touching the object,
     or a lift that loses it, starts a new approach.
 
     The phase restarts whenever the env is at step 0 of an episode, so one

@@ -22,6 +22,14 @@ from node_common.runner import configure_discovery
 
 REPO = Path(__file__).resolve().parent.parent
 
+
+def smoke_tasks() -> list[str]:
+    """The tasks of the smoke preset, sorted, as its file names them."""
+    import yaml
+
+    params = yaml.safe_load((REPO / "assets" / "params" / "smoke.yaml").read_text())
+    return sorted(params["/**/curriculum_node"]["ros__parameters"]["tasks"].split(","))
+
 _DOMAIN_ID, _DOMAIN_LOCK = reserve_domain_id()
 os.environ["ROS_DOMAIN_ID"] = str(_DOMAIN_ID)
 os.environ["ROS_AUTOMATIC_DISCOVERY_RANGE"] = "LOCALHOST"

@@ -57,3 +57,15 @@ def test_validate_refuses_a_file_that_is_no_transfer_report(tmp_path) -> None:
                           str(tmp_path / "validate.md"))
     assert result.returncode == 1 and "README.md" in result.stderr and "Traceback" not in result.stderr
     assert not (tmp_path / "validate.md").exists()
+
+
+@pytest.mark.parametrize("args, message", [
+    (["validate", "--episodes", "-3"], "--episodes: -3 is below 0"),
+    (["check", "--perturbed-episodes", "0"], "--perturbed-episodes: 0 is below 1"),
+    (["check", "--check-episodes", "0"], "--check-episodes must be at least 1"),
+    (["generate", "--per-column", "6"], "--per-column: 6 is below 7"),
+])
+def test_asset_commands_refuse_counts_out_of_range_before_they_start(args, message) -> None:
+    result = subprocess.run([sys.executable, "-m", "glocal_app.cli", "assets", *args], capture_output=True,
+                            text=True, timeout=120, cwd=REPO)
+    assert result.returncode == 2 and message in result.stderr and "Traceback" not in result.stderr

@@ -297,3 +297,13 @@ def test_committed_urdfs_load_rest_and_fit_gripper(committed: ObjectSetMetadata)
             p.removeBody(body, physicsClientId=client)
     finally:
         p.disconnect(client)
+
+
+def test_import_egad_command_names_the_bad_file_and_changes_nothing(tmp_path: Path) -> None:
+    src, out = tmp_path / "egad", tmp_path / "out"
+    src.mkdir()
+    (src / "C3.obj").write_text("")
+    result = subprocess.run([sys.executable, "-m", "glocal_app.cli", "assets", "import-egad", str(src), "--partial",
+                             "--out", str(out)], capture_output=True, text=True, timeout=120, cwd=REPO)
+    assert result.returncode == 1 and "C3.obj: the mesh is empty" in result.stderr
+    assert "Traceback" not in result.stderr and not out.exists()
