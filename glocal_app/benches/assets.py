@@ -60,9 +60,10 @@ def prior_scores(objects_dir: Path, tasks: Sequence[str], episodes: int, seed: i
 
 def steps_to_b(goals: Sequence) -> dict[str, float]:
     """Median steps to B of each task's ``TransferGoal``s; ``inf`` where most never passed."""
-    tasks = {goal.task for goal in goals}
-    return {task: statistics.median(math.inf if goal.steps_to_b is None else goal.steps_to_b
-                                    for goal in goals if goal.task == task) for task in tasks}
+    from glocal_app.benches.transfer import median_steps_to_b
+
+    return {task: median_steps_to_b([goal for goal in goals if goal.task == task])
+            for task in {goal.task for goal in goals}}
 
 
 def letter_correlation(values: Mapping[str, float]) -> tuple[float, int]:

@@ -347,7 +347,7 @@ def read_transfer_goals(path: Path, settings: TransferSettings) -> list[Transfer
     return goals
 
 
-def _median_steps_to_b(goals: Sequence[TransferGoal]) -> float:
+def median_steps_to_b(goals: Sequence[TransferGoal]) -> float:
     """Median with the goals that never passed B counted as infinitely slow."""
     return statistics.median(math.inf if g.steps_to_b is None else g.steps_to_b for g in goals)
 
@@ -395,8 +395,8 @@ def transfer_bench_report(goals: Sequence[TransferGoal], command: str, settings:
         below = [g for g in mine if g.steps_to_b != 0]
         lines.append(
             f"| {recipe} | {prior} | {len(mine)} | {sum(g.steps_to_b is not None for g in mine)} "
-            f"| {_steps(_median_steps_to_b(mine))} | {len(below)} | {sum(g.steps_to_b is not None for g in below)} "
-            f"| {_steps(_median_steps_to_b(below)) if below else '-'} | {sum(g.collapsed for g in mine)} "
+            f"| {_steps(median_steps_to_b(mine))} | {len(below)} | {sum(g.steps_to_b is not None for g in below)} "
+            f"| {_steps(median_steps_to_b(below)) if below else '-'} | {sum(g.collapsed for g in mine)} "
             f"| {statistics.median(g.drop_points for g in mine):.0f} "
             f"| {statistics.median(g.final for g in mine):.0f} / {settings.eval_episodes} "
             f"| {statistics.median(g.wall_s for g in mine):.0f} |")
