@@ -14,7 +14,9 @@ from learner_node.policy_store import PolicyStore
 
 def test_bench_learner_reports_one_row_per_env_count():
     log: list[str] = []
-    rows = run_learner_bench([1], steps=150, rounds=1, log=log.append)
+    # learner_node reports progress about once a second: enough steps for several reports at the 64x64
+    # network's 200 env steps/s on an idle machine (150 steps gave 2 reports, too few to time).
+    rows = run_learner_bench([1], steps=1000, rounds=1, log=log.append)
 
     (row,) = rows
     assert (row.num_envs, row.workers) == (1, 1)
@@ -23,7 +25,7 @@ def test_bench_learner_reports_one_row_per_env_count():
     assert [len(run) for run in row.rounds] == [1, 1, 1]
     assert len(log) == 4  # three measurements and the summary
 
-    report = learner_bench_report(rows, "glocal-ros bench learner --envs 1", steps=150, rounds=1)
+    report = learner_bench_report(rows, "glocal-ros bench learner --envs 1", steps=1000, rounds=1)
     lines = report.splitlines()
     assert lines[0].startswith("# bench learner")
     assert "Command: `glocal-ros bench learner --envs 1`" in report
