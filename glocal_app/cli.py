@@ -13,6 +13,7 @@ import sys
 from pathlib import Path
 
 from glocal_app.bag_cli import add_bag_commands
+from glocal_app.benches.curriculum import BENCH_PRESET, DEFAULT_OUT, DEFAULT_RESULTS
 from glocal_app.benches.transfer import INITIAL_POLICY, TRANSFER_TASKS, TransferSettings
 from glocal_app.nodes import NODES
 from glocal_ros.curriculum.codes import STRATEGY_NAMES
@@ -76,13 +77,31 @@ def cmd_launch(args: argparse.Namespace) -> int:
 def cmd_experiment(args: argparse.Namespace) -> int:
     from glocal_app.launch import experiment
 
-    strategies = [s.strip() for s in args.strategies.split(",") if s.strip()]
-    unknown = [s for s in strategies if s not in STRATEGY_NAMES]
-    if unknown or not strategies:
-        raise ValueError(f"unknown strategies {unknown}: expected some of {', '.join(STRATEGY_NAMES)}")
-    seeds = [int(seed) for seed in args.seeds.split(",")]
-    return experiment(strategies, seeds, args.preset, args.out, namespace=args.namespace,
-                      use_sim_time=args.use_sim_time)
+    return experiment(args.strategies, args.seeds, args.preset, args.out, namespace=args.namespace,
+                      use_sim_time=args.use_sim_time, step_budget=args.budget)
+
+
+def _name_list(text: str) -> list[str]:
+    """An argparse type: comma-separated names (checked by whoever takes them)."""
+    return [name.strip() for name in text.split(",") if name.strip()]
+
+
+def _seed_list(text: str) -> list[int]:
+    """An argparse type: comma-separated non-negative integer seeds."""
+    items = [item.strip() for item in text.split(",")]
+    if not all(item.isdigit() for item in items):
+        raise argparse.ArgumentTypeError(f"{text!r}: expected comma-separated non-negative integers, e.g. 0,1,2")
+    return [int(item) for item in items]
+
+
+def add_experiment_arguments(parser: argparse.ArgumentParser, preset: str) -> None:
+    """What ``experiment`` and ``bench curriculum`` share: which runs, at which preset and budget."""
+    parser.add_argument("--strategies", type=_name_list, default=list(STRATEGY_NAMES),
+                        help=f"comma-separated, of {', '.join(STRATEGY_NAMES)} (default: all)")
+    parser.add_argument("--seeds", type=_seed_list, default=[0, 1, 2], help="comma-separated (default: 0,1,2)")
+    parser.add_argument("--preset", default=preset, help=f"a parameter file of assets/params (default: {preset})")
+    parser.add_argument("--budget", type=_count(1), default=None, metavar="STEPS",
+                        help="training steps of every run, instead of the preset's step_budget")
 
 
 def add_graph_arguments(parser: argparse.ArgumentParser) -> None:
@@ -276,6 +295,24 @@ def cmd_bench_transfer(args: argparse.Namespace) -> int:
     return write_bench_report(report, args.out)
 
 
+def cmd_bench_curriculum(args: argparse.Namespace) -> int:
+    from glocal_app.benches.curriculum import bench_inputs, check_bench, tabulate_curriculum_bench
+
+    command = "glocal-ros " + " ".join(sys.argv[1:])
+    code = 0
+    if not args.tabulate:
+        check_bench(args.strategies, args.seeds, args.preset, args.out, args.budget)
+        bench_inputs(args.out, args.merge)  # a --merge that holds no run is refused before the first run
+        from glocal_app.launch import experiment
+
+        code = experiment(args.strategies, args.seeds, args.preset, args.out, step_budget=args.budget, report=False)
+        if code == 130:  # interrupted: the same command resumes
+            return code
+    report = tabulate_curriculum_bench(bench_inputs(args.out, args.merge), command, args.results)
+    write_bench_report(report, args.results)
+    return code
+
+
 def cmd_train_prior(args: argparse.Namespace) -> int:
     """Train the A0 prior in-process, evaluate it, store it (as `prior` in assets/priors by default)."""
     from tqdm import tqdm
@@ -460,6 +497,20 @@ def build_parser() -> argparse.ArgumentParser:
     bench_transfer.add_argument("--out", type=Path, default=Path("bench/results/transfer.md"))
     bench_transfer.set_defaults(func=cmd_bench_transfer)
 
+    bench_curriculum = bench_commands.add_parser(
+        "curriculum", help="the paper's comparison: strategies x seeds at one training budget through the graph "
+        "(glocal-ros experiment, resumable), then learned objects per milestone, ratios, t-tests, cost")
+    add_experiment_arguments(bench_curriculum, preset=BENCH_PRESET)
+    bench_curriculum.add_argument("--out", type=Path, default=DEFAULT_OUT,
+                                  help=f"the runs, <strategy>-seed<N>/ each (default: {DEFAULT_OUT})")
+    bench_curriculum.add_argument("--merge", type=Path, nargs="+", default=[], metavar="DIR",
+                                  help="more runs for the table: run directories, or other benches' --out")
+    bench_curriculum.add_argument("--tabulate", action="store_true",
+                                  help="run nothing: tabulate the runs of --out and --merge")
+    bench_curriculum.add_argument("--results", type=Path, default=DEFAULT_RESULTS,
+                                  help="the table; the report's figures go to a folder of its name beside it")
+    bench_curriculum.set_defaults(func=cmd_bench_curriculum)
+
     prior = commands.add_parser("train-prior", help="train the A0 prior (resumable) and store it in assets/priors")
     prior.add_argument("--steps", type=int, default=PriorConfig.max_steps, help="most SAC env steps")
     prior.add_argument("--min-steps", type=int, default=PriorConfig.min_steps,
@@ -498,9 +549,7 @@ def build_parser() -> argparse.ArgumentParser:
 
     experiment = commands.add_parser("experiment", help="strategies x seeds as separate runs (resumable), "
                                      "then one report")
-    experiment.add_argument("--strategies", default=",".join(STRATEGY_NAMES), help="comma-separated")
-    experiment.add_argument("--seeds", default="0,1,2", help="comma-separated")
-    experiment.add_argument("--preset", default="smoke", help="a parameter file of assets/params")
+    add_experiment_arguments(experiment, preset="smoke")
     experiment.add_argument("--out", type=Path, required=True, help="gets <strategy>-seed<N>/ per run and report/")
     add_graph_arguments(experiment)
     experiment.set_defaults(func=cmd_experiment)

@@ -48,8 +48,10 @@ from glocal_interfaces.msg import CurriculumState, EpisodeRecord, TrainingProgre
 from glocal_interfaces.srv import ListPolicies
 from rclpy.signals import SignalHandlerOptions
 
-from glocal_app.processes import (NodeProcess, claim_run_dir, isolated_environment, namespace_arguments,
-                                   new_bag_path, normalize_namespace, preset_file, run_parameters)
+from glocal_app.processes import (NodeProcess, check_run_dir, claim_run_dir, isolated_environment,
+                                   namespace_arguments, new_bag_path, normalize_namespace, preset_file,
+                                   preset_parameters, run_parameters, run_settings)
+from glocal_ros.curriculum.codes import STRATEGY_NAMES
 from glocal_ros.domain import choose_domain_id
 from glocal_ros.recording import message_counts
 from node_common import names, qos
@@ -195,17 +197,19 @@ def check_graph(node, watchdog: Watchdog, progress: Progress, started: Sequence[
 
 def launch(strategy: str, preset: str, seed: int, run_dir: Path, startup_timeout: float = 120.0,
            report: bool = True, watchdog_sec: float = DEFAULT_WATCHDOG_SEC, namespace: str = "",
-           use_sim_time: bool = False) -> int:
+           use_sim_time: bool = False, step_budget: int | None = None) -> int:
     """Run (or resume) one run in ``run_dir``; the curriculum's exit code, 130 on Ctrl-C, ``EXIT_STALLED``.
 
-    Bad input (an unknown preset, an invalid namespace or ROS_DOMAIN_ID, another run's directory)
-    raises ``ValueError`` before anything starts.
+    ``step_budget`` replaces the preset's training-step budget. Bad input (an unknown preset, a
+    budget below one evaluation interval, an invalid namespace or ROS_DOMAIN_ID, another run's
+    directory) raises ``ValueError`` before anything starts.
     """
     params_file = preset_file(preset)
+    check_step_budget(preset, step_budget)
     namespace = normalize_namespace(namespace)
     domain = choose_domain_id()
     try:
-        resumed = claim_run_dir(run_dir, strategy, preset, seed)
+        resumed = claim_run_dir(run_dir, run_settings(strategy, preset, seed, step_budget))
     except ValueError:
         domain.close()
         raise
@@ -241,7 +245,7 @@ def launch(strategy: str, preset: str, seed: int, run_dir: Path, startup_timeout
     # Raw: the watchdog only needs to know that an episode came, not what it holds.
     node.create_subscription(EpisodeRecord, names.EPISODES, heard("an episode"), qos.EPISODES, raw=True)
     started: list[NodeProcess] = []
-    plan = run_parameters(strategy, seed, run_dir, bag, use_sim_time)
+    plan = run_parameters(strategy, seed, run_dir, bag, use_sim_time, step_budget)
 
     def start(name: str) -> NodeProcess:
         process = NodeProcess(name, logs, plan[name], params_file, env, extra_args=namespace_arguments(namespace))
@@ -310,28 +314,72 @@ def write_run_report(run_dirs: Sequence[Path], out_dir: Path) -> None:
     print(f"report: {path}")
 
 
+def check_step_budget(preset: str, step_budget: int | None) -> None:
+    """``ValueError`` when ``step_budget`` (None: the preset's own) ends before any strategy evaluates a trained task.
+
+    GloCAL checks a training task every ``eval_interval`` steps, the baselines evaluate every
+    ``baseline_eval_interval`` steps: a budget below either leaves that strategy nothing to learn by.
+    """
+    if step_budget is None:
+        return
+    parameters = preset_parameters(preset, "curriculum_node")
+    intervals = {name: int(parameters[name]) for name in ("eval_interval", "baseline_eval_interval")
+                 if name in parameters}
+    if step_budget < max(intervals.values(), default=1):
+        shown = ", ".join(f"{name} {value}" for name, value in intervals.items())
+        raise ValueError(f"a budget of {step_budget} training steps is below one evaluation of preset {preset} "
+                         f"({shown}): a strategy would never evaluate what it trained")
+
+
+def experiment_runs(strategies: Sequence[str], seeds: Sequence[int], out: Path) -> list[tuple[str, int, Path]]:
+    """``(strategy, seed, OUT/<strategy>-seed<N>)`` of every run of an experiment, in the order they run."""
+    return [(strategy, seed, out / f"{strategy}-seed{seed}") for strategy in strategies for seed in seeds]
+
+
+def check_experiment(strategies: Sequence[str], seeds: Sequence[int], preset: str, out: Path,
+                     step_budget: int | None = None, namespace: str = "") -> None:
+    """Everything ``experiment`` refuses, checked before its first node starts; ``ValueError`` says what.
+
+    Strategies must be known and not repeat, seeds non-negative and not repeat, the preset must
+    exist, the budget cover one evaluation, and no run directory may hold a run of other settings
+    (another preset or budget): its runs would be mixed into this experiment's report.
+    """
+    unknown = [s for s in strategies if s not in STRATEGY_NAMES]
+    if unknown or not strategies:
+        raise ValueError(f"unknown strategies {unknown}: expected some of {', '.join(STRATEGY_NAMES)}")
+    if len(set(strategies)) != len(strategies) or len(set(seeds)) != len(seeds) or not seeds:
+        raise ValueError(f"strategies {list(strategies)} and seeds {list(seeds)} must each be given once")
+    if min(seeds) < 0:
+        raise ValueError(f"seeds must be non-negative integers, got {list(seeds)}")
+    preset_file(preset)
+    check_step_budget(preset, step_budget)
+    normalize_namespace(namespace)
+    for strategy, seed, run_dir in experiment_runs(strategies, seeds, out):
+        check_run_dir(run_dir, run_settings(strategy, preset, seed, step_budget))
+
+
 def experiment(strategies: Sequence[str], seeds: Sequence[int], preset: str, out: Path, namespace: str = "",
-               use_sim_time: bool = False) -> int:
+               use_sim_time: bool = False, step_budget: int | None = None, report: bool = True) -> int:
     """Every strategy x seed as its own run under ``out``; finished runs are kept, others (re)launched.
 
-    The runs go one after another, each with ``launch``'s namespace, sim time and domain choice.
+    The runs go one after another, each with ``launch``'s namespace, sim time and domain choice,
+    after ``check_experiment`` passed; then one report over all of them (unless ``report`` is off).
     """
-    normalize_namespace(namespace)  # refused before the first run, not after it
+    check_experiment(strategies, seeds, preset, out, step_budget, namespace)
     run_dirs, failed = [], []
-    for strategy in strategies:
-        for seed in seeds:
-            run_dir = out / f"{strategy}-seed{seed}"
-            run_dirs.append(run_dir)
-            if run_finished(run_dir):
-                print(f"{run_dir.name}: finished before")
-                continue
-            code = launch(strategy, preset, seed, run_dir, report=False, namespace=namespace,
-                          use_sim_time=use_sim_time)
-            if code == 130:
-                return code
-            if code:
-                failed.append(run_dir.name)
-    write_run_report(run_dirs, out / "report")
+    for strategy, seed, run_dir in experiment_runs(strategies, seeds, out):
+        run_dirs.append(run_dir)
+        if run_finished(run_dir):
+            print(f"{run_dir.name}: finished before")
+            continue
+        code = launch(strategy, preset, seed, run_dir, report=False, namespace=namespace,
+                      use_sim_time=use_sim_time, step_budget=step_budget)
+        if code == 130:
+            return code
+        if code:
+            failed.append(run_dir.name)
+    if report:
+        write_run_report(run_dirs, out / "report")
     if failed:
         print(f"failed runs: {', '.join(failed)} (the same command retries them)")
     return 1 if failed else 0

@@ -104,33 +104,61 @@ def new_bag_path(run_dir: Path) -> Path:
     return bag
 
 
-def claim_run_dir(run_dir: Path, strategy: str, preset: str, seed: int) -> bool:
-    """Record what RUN_DIR runs; True when it resumes an earlier launch. Another run's directory is refused."""
+def run_settings(strategy: str, preset: str, seed: int, step_budget: int | None = None) -> dict[str, object]:
+    """What ``RUN_FILE`` records of a run: its strategy, preset and seed, and a budget that overrides the preset's."""
+    settings: dict[str, object] = {"strategy": strategy, "preset": preset, "seed": seed}
+    if step_budget is not None:
+        settings["step_budget"] = step_budget
+    return settings
+
+
+def check_run_dir(run_dir: Path, settings: Mapping[str, object]) -> bool:
+    """True when RUN_DIR holds an earlier launch of the run ``settings``; ``ValueError`` when it holds another run."""
     path = run_dir / RUN_FILE
-    wanted = {"strategy": strategy, "preset": preset, "seed": seed}
-    if path.is_file():
-        found = json.loads(path.read_text())
-        if found != wanted:
-            raise ValueError(f"{run_dir} holds the run {found}, not {wanted}: choose another run directory (--out)")
+    if not path.is_file():
+        return False
+    found = json.loads(path.read_text())
+    if found != dict(settings):
+        raise ValueError(f"{run_dir} holds the run {found}, not {dict(settings)}: choose another run directory (--out)")
+    return True
+
+
+def claim_run_dir(run_dir: Path, settings: Mapping[str, object]) -> bool:
+    """Record which run RUN_DIR holds (``run_settings``); True when it resumes an earlier launch.
+
+    Another run's directory is refused (``check_run_dir``).
+    """
+    if check_run_dir(run_dir, settings):
         return True
     run_dir.mkdir(parents=True, exist_ok=True)
-    path.write_text(json.dumps(wanted) + "\n")
+    (run_dir / RUN_FILE).write_text(json.dumps(dict(settings)) + "\n")
     return False
 
 
-def run_parameters(strategy: str, seed: int, run_dir: Path, bag: Path,
-                   use_sim_time: bool = False) -> dict[str, dict[str, object]]:
+def preset_parameters(preset: str, node: str, params_dir: Path | None = None) -> dict[str, object]:
+    """The parameters a preset gives ``node`` (its ``/**/NODE`` section)."""
+    import yaml  # not at import: see the module's docstring
+
+    document = yaml.safe_load(preset_file(preset, params_dir).read_text()) or {}
+    return dict(document.get(f"/**/{node}", {}).get("ros__parameters", {}))
+
+
+def run_parameters(strategy: str, seed: int, run_dir: Path, bag: Path, use_sim_time: bool = False,
+                   step_budget: int | None = None) -> dict[str, dict[str, object]]:
     """What each node of a run gets on top of its preset, keyed by node, in ``RUN_NODES`` order.
 
     ``use_sim_time`` is given to the nodes of ``SIM_TIME_NODES`` only, and only when on: a node
-    without it keeps whatever its preset says.
+    without it keeps whatever its preset says. ``step_budget`` (training steps of the whole run)
+    replaces the preset's when given.
     """
+    budget = {"step_budget": step_budget} if step_budget is not None else {}
     sim_time = {"use_sim_time": True} if use_sim_time else {}
     return {
         "recorder_node": {"output": str(bag), **sim_time},
         "sim_node": {"seed": seed, **sim_time},
         "learner_node": {"seed": seed, "policy_dir": str(run_dir / "policies")},
-        "curriculum_node": {"strategy": strategy, "seed": seed, "state_dir": str(run_dir / "curriculum")},
+        "curriculum_node": {"strategy": strategy, "seed": seed, "state_dir": str(run_dir / "curriculum"),
+                            **budget},
     }
 
 

@@ -49,7 +49,7 @@ from launch.events import Shutdown
 from launch_ros.actions import Node
 
 from glocal_app.processes import (RUN_NODES, claim_run_dir, default_run_dir, namespace_remappings, new_bag_path,
-                                  normalize_namespace, preset_file, run_parameters)
+                                  normalize_namespace, preset_file, run_parameters, run_settings)
 
 PACKAGE = "glocal_ros"
 #: As glocal_ros.curriculum.codes.STRATEGY_NAMES (not imported: see the docstring; a test compares them).
@@ -77,7 +77,7 @@ def run_nodes(context, *args, **kwargs) -> list:
     run_dir = Path(arguments["out"]).expanduser().resolve() if arguments["out"].strip() else \
         default_run_dir(strategy, seed)
     params_file = preset_file(preset, params_dir())
-    claim_run_dir(run_dir, strategy, preset, seed)
+    claim_run_dir(run_dir, run_settings(strategy, preset, seed))
     plan = run_parameters(strategy, seed, run_dir, new_bag_path(run_dir), use_sim_time)
     nodes = {
         name: Node(

@@ -228,4 +228,4 @@ def test_namespace_and_sim_time_reach_launch_and_experiment(monkeypatch, tmp_pat
                  "--use-sim-time"]) == 0
     assert main(["experiment", "--strategies", "random", "--seeds", "0", "--out", str(tmp_path)]) == 0
     assert calls[0][1] == {"namespace": "robot1", "use_sim_time": True}
-    assert calls[1][1] == {"namespace": "", "use_sim_time": False}
+    assert calls[1][1] == {"namespace": "", "use_sim_time": False, "step_budget": None}

@@ -37,7 +37,7 @@ def timeline_png(run: RunData) -> str:
     return f"timeline_{run.strategy}_seed{'unknown' if run.seed is None else run.seed}.png"
 
 
-def _table(header: Sequence[str], rows: Iterable[Sequence[object]]) -> list[str]:
+def markdown_table(header: Sequence[str], rows: Iterable[Sequence[object]]) -> list[str]:
     lines = ["| " + " | ".join(header) + " |", "|" + "|".join("---" for _ in header) + "|"]
     lines += ["| " + " | ".join(str(cell) for cell in row) + " |" for row in rows]
     return lines
@@ -58,7 +58,7 @@ def runs_section(runs: Sequence[RunData]) -> list[str]:
         for run in runs
     ]
     return ["## Runs", "",
-            *_table(("run", "strategy", "seed", "steps / budget", "learned", "iterations", "finished",
+            *markdown_table(("run", "strategy", "seed", "steps / budget", "learned", "iterations", "finished",
                      "episodes train/eval (not interrupted)", "bags"), rows), ""]
 
 
@@ -74,7 +74,7 @@ def final_section(groups: dict[str, list[RunData]]) -> list[str]:
                      f"{sum(run.total_steps for run in runs) / len(runs):,.0f}",
                      "-" if None in evaluations else f"{sum(evaluations) / len(evaluations):,.0f}"))
     return ["## Learned objects at the end of each run", "",
-            *_table(("strategy", "seeds", "learned (mean ± std)", "min", "max", "finished",
+            *markdown_table(("strategy", "seeds", "learned (mean ± std)", "min", "max", "finished",
                      "training steps (mean)", "evaluation episodes (mean)"), rows),
             "", "Evaluation episodes are not charged to the training-step budget (the paper's comparison "
             "is at equal training timesteps); -: a run's states predate the count.", ""]
@@ -88,7 +88,7 @@ def _stats_cell(table: MilestoneTable, strategy: str, step: int) -> str:
     return f"{mean:.1f} ± {std:.1f} (n={n})" if n > 1 else f"{mean:.0f} (n=1)"
 
 
-def _p_cell(p: float | None) -> str:
+def p_value_cell(p: float | None) -> str:
     if p is None:
         return "n/a"
     return (f"{p:.2e}" if p < 0.001 else f"{p:.3f}") + ("*" if p < 0.05 else "")
@@ -99,17 +99,21 @@ def milestones_section(table: MilestoneTable) -> list[str]:
     if not table.steps:
         return lines + ["No run reached a milestone.", ""]
     header = ("strategy", *(format_steps(step) for step in table.steps))
-    lines += _table(header, ((s, *(_stats_cell(table, s, step) for step in table.steps)) for s in table.values))
+    lines += markdown_table(header, ((s, *(_stats_cell(table, s, step) for step in table.steps)) for s in table.values))
     lines.append("")
     lines.append("Mean ± sample standard deviation over the seeds that reached the milestone.")
     lines.append("")
+    return lines + p_value_section(table, table.steps)
+
+
+def p_value_section(table: MilestoneTable, steps: Sequence[int]) -> list[str]:
+    """Welch's t-test of the reference strategy against each other one, at ``steps``: a heading and a table."""
     if table.reference is None:
-        lines += ["No t-test: it needs runs of `glocal` and of at least one other strategy.", ""]
-        return lines
-    lines += [f"### Welch's t-test, {table.reference} vs each strategy (two-sided p; * p < 0.05)", ""]
-    lines += _table(header, ((s, *(_p_cell(p[step]) for step in table.steps)) for s, p in table.p_values.items()))
-    lines += ["", "n/a: a group has fewer than 2 seeds at that milestone, or both are constant and equal.", ""]
-    return lines
+        return ["No t-test: it needs runs of `glocal` and of at least one other strategy.", ""]
+    lines = [f"### Welch's t-test, {table.reference} vs each strategy (two-sided p; * p < 0.05)", ""]
+    lines += markdown_table(("strategy", *(format_steps(step) for step in steps)),
+                            ((s, *(p_value_cell(p.get(step)) for step in steps)) for s, p in table.p_values.items()))
+    return lines + ["", "n/a: a group has fewer than 2 seeds at that milestone, or both are constant and equal.", ""]
 
 
 def timeline_section(run: RunData) -> list[str]:
@@ -117,7 +121,7 @@ def timeline_section(run: RunData) -> list[str]:
     rows = [(r.iteration, f"{r.start_steps:,}", r.global_task or "-", ", ".join(r.local_tasks) or "-",
              ", ".join(t for t in r.tasks if t in r.learned) or "-") for r in records]
     return [f"### Curriculum of {run.label}", "",
-            *_table(("iteration", "steps at start", "global task", "local tasks", "learned in it"), rows), ""]
+            *markdown_table(("iteration", "steps at start", "global task", "local tasks", "learned in it"), rows), ""]
 
 
 def _count(run: RunData, table_name: str) -> int:

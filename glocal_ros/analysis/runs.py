@@ -165,6 +165,8 @@ class RunData:
     bags_skipped: list[tuple[Path, str]] = field(default_factory=list)  # (bag, why)
     episodes: EpisodeCounts | None = None
     message_counts: dict[str, int] = field(default_factory=dict)
+    #: Wall-clock seconds the curriculum ran: per bag, its first state to its last, summed over bags.
+    curriculum_seconds: float = 0.0
 
     def __post_init__(self) -> None:
         if not self.states:
@@ -442,7 +444,9 @@ def read_run(run_dir: Path, count_episodes: bool = True) -> RunData | None:
     episodes = None
     if count_episodes:
         episodes = sum((c.episodes for c in contents if c.episodes is not None), EpisodeCounts())
-    return RunData(run_dir, states, [c.path for c in contents], skipped, episodes, message_counts)
+    seconds = sum((max(s.log_time_ns for s in c.states) - min(s.log_time_ns for s in c.states)) / 1e9
+                  for c in contents if c.states)
+    return RunData(run_dir, states, [c.path for c in contents], skipped, episodes, message_counts, seconds)
 
 
 def read_runs(run_dirs: Iterable[Path], count_episodes: bool = True) -> list[RunData]:

@@ -1,0 +1,215 @@
+"""``glocal-ros bench curriculum``: the paper's comparison, every strategy side by side on the real simulation.
+
+Underneath is ``glocal-ros experiment``: each strategy x seed is one run of
+the whole graph (recorder, sim, learner and curriculum nodes) into
+``OUT/<strategy>-seed<N>/``, all from the same prior, on the same tasks, at
+the same training-step budget (the preset's, or ``--budget``). Finished runs
+are kept and interrupted ones resumed, so the same command continues a bench
+that was stopped, and ``--strategies`` / ``--seeds`` run parts of it.
+
+The table is read from the bags alone (``glocal_ros.analysis``), of every
+run directory under OUT and of those given with ``--merge`` (run directories,
+or other benches' OUT): runs made on other days or machines are tabulated
+together, provided they share the tasks and the budget. It has:
+
+- learned objects per strategy at each milestone: mean and (min-max) over
+  seeds, and Welch's two-sided t-test of GloCAL against each strategy;
+- the ratios GloCAL / random and GloCAL / each ALP-GMM at each milestone
+  (equal training budget: evaluation episodes are not charged to it, as in
+  the paper), of the means over seeds;
+- per strategy: runs finished, evaluation episodes, training steps and the
+  curriculum's wall-clock (its first state to its last, per bag);
+- the paper's numbers at 4M steps beside the shares learned here;
+- the report's figures (``glocal-ros report`` over the same runs, written
+  beside the table in ``curriculum/``).
+
+Before any node starts, ``check_bench`` refuses unknown strategies, a budget
+below one evaluation, and an OUT that holds runs of other settings (another
+preset or budget): they would be mixed into the table.
+"""
+
+from __future__ import annotations
+
+import json
+import statistics
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Sequence
+
+from glocal_ros.analysis.report import markdown_table, p_value_section
+from glocal_ros.analysis.runs import (REFERENCE_STRATEGY, RunData, format_steps, group_by_strategy, milestone_table,
+                                      read_runs)
+
+#: The preset the bench runs by default: 16 objects, six strategies x 3 seeds in about 90 minutes on 2 cores.
+BENCH_PRESET = "bench"
+DEFAULT_OUT = Path("runs/bench-curriculum")
+DEFAULT_RESULTS = Path("bench/results/curriculum.md")
+#: The strategies GloCAL's ratios are taken against: the paper's baselines.
+BASELINES = ("random", "alp_gmm_250", "alp_gmm_10")
+#: The paper's learned objects of 49 at 4M training steps (Fig. 6 and 7, and the ablations' text).
+PAPER_LEARNED_AT_4M = {"glocal": 49, "random": 41, "alp_gmm_250": 41, "alp_gmm_10": 42, "glocal_no_global": 39,
+                       "glocal_random_cluster": 10}
+PAPER_TASKS = 49
+
+
+def bench_run_dirs(out: Path) -> list[Path]:
+    """The run directories of a bench's OUT (each with a ``run.json``), or OUT itself when it is one run."""
+    from glocal_app.processes import RUN_FILE
+
+    if (out / RUN_FILE).is_file():
+        return [out]
+    return sorted(path.parent for path in out.glob(f"*/{RUN_FILE}"))
+
+
+def check_bench(strategies: Sequence[str], seeds: Sequence[int], preset: str, out: Path,
+                step_budget: int | None) -> None:
+    """``ValueError`` for what ``experiment`` refuses, and for any run under OUT of another preset or budget."""
+    from glocal_app.launch import check_experiment
+    from glocal_app.processes import RUN_FILE
+
+    check_experiment(strategies, seeds, preset, out, step_budget)
+    for run_dir in bench_run_dirs(out):
+        found = json.loads((run_dir / RUN_FILE).read_text())
+        if found.get("preset") != preset or found.get("step_budget") != step_budget:
+            raise ValueError(f"{run_dir} is a run of preset {found.get('preset')} and budget "
+                             f"{found.get('step_budget') or 'of its preset'}, not of preset {preset} and budget "
+                             f"{step_budget or 'of its preset'}: choose another --out")
+
+
+def read_bench_runs(run_dirs: Sequence[Path]) -> list[RunData]:
+    """The runs of ``run_dirs``; ``ValueError`` when there is none, or they differ in tasks or budget."""
+    runs = read_runs(run_dirs, count_episodes=False)
+    if not runs:
+        raise ValueError(f"no readable run in {', '.join(map(str, run_dirs)) or 'no directory'}")
+    first = runs[0]
+    for run in runs[1:]:
+        if set(run.tasks) != set(first.tasks) or run.step_budget != first.step_budget:
+            raise ValueError(f"{run.run_dir} ({len(run.tasks)} tasks, budget {run.step_budget:,}) and "
+                             f"{first.run_dir} ({len(first.tasks)} tasks, budget {first.step_budget:,}) are not "
+                             f"runs at equal settings: tabulate them apart")
+    return runs
+
+
+@dataclass(frozen=True)
+class Spread:
+    """Mean, min and max over seeds."""
+
+    mean: float
+    low: float
+    high: float
+    n: int
+
+    @classmethod
+    def of(cls, values: Sequence[float]) -> Spread | None:
+        if not values:
+            return None
+        return cls(statistics.fmean(values), min(values), max(values), len(values))
+
+    def cell(self, digits: int = 1) -> str:
+        if self.n == 1:
+            return f"{self.mean:.{digits}f} (n=1)"
+        return f"{self.mean:.{digits}f} ({self.low:.{digits}f}-{self.high:.{digits}f})"
+
+
+def _cell(spread: Spread | None, digits: int = 1) -> str:
+    return "-" if spread is None else spread.cell(digits)
+
+
+def _ratio(numerator: Spread | None, denominator: Spread | None) -> str:
+    if numerator is None or denominator is None or denominator.mean == 0:
+        return "-"
+    return f"{numerator.mean / denominator.mean:.2f}x"
+
+
+def curriculum_bench_report(runs: Sequence[RunData], command: str, figures_dir: Path | None,
+                            figures_report: Path | None) -> str:
+    """The markdown of ``bench/results/curriculum.md`` for ``runs`` (``read_bench_runs``)."""
+    groups = group_by_strategy(runs)
+    table = milestone_table(groups)
+    tasks, budget = runs[0].tasks, runs[0].step_budget
+    milestones = [step for step in table.steps if step <= budget]
+    spread = {strategy: {step: Spread.of(table.values[strategy].get(step, [])) for step in milestones}
+              for strategy in groups}
+    lines = ["# bench curriculum: every strategy at one training budget, on the real simulation", "",
+             f"Command: `{command}`  ",
+             f"{len(runs)} runs of {len(groups)} strategies; "
+             f"{f'all {PAPER_TASKS}' if len(tasks) == PAPER_TASKS else len(tasks)} objects ({', '.join(tasks)}); "
+             f"{budget:,} training steps per run, the same prior and tasks for every run. Learned: a score above "
+             f"B in an evaluation (evaluation episodes are not charged to the budget, as in the paper). Runs "
+             f"read: {', '.join(f'`{run.run_dir}`' for run in runs)}.", ""]
+
+    lines += ["## Learned objects at each milestone", "",
+              "Mean (min-max) over seeds; n = seeds that reached it.", ""]
+    header = ("strategy", "seeds", *(format_steps(step) for step in milestones))
+    lines += markdown_table(header, ((strategy, len(group), *(_cell(spread[strategy][step]) for step in milestones))
+                             for strategy, group in groups.items()))
+    lines.append("")
+
+    reference = spread.get(REFERENCE_STRATEGY)
+    compared = [b for b in BASELINES if b in groups]
+    if reference is not None and compared:
+        lines += ["## GloCAL / baseline at equal budget (ratio of mean learned objects; the goal: >= 1.15x)", ""]
+        lines += markdown_table(("ratio", *(format_steps(step) for step in milestones)),
+                        ((f"glocal / {b}", *(_ratio(reference[step], spread[b][step]) for step in milestones))
+                         for b in compared))
+        lines.append("")
+    lines += p_value_section(table, milestones)
+
+    lines += ["## Cost per strategy", ""]
+    rows = []
+    for strategy, group in groups.items():
+        evaluations = [run.evaluation_episodes for run in group if run.evaluation_episodes is not None]
+        seconds = [run.curriculum_seconds for run in group]
+        rows.append((strategy, f"{sum(run.finished for run in group)}/{len(group)}",
+                     _cell(Spread.of([len(run.learned_tasks) for run in group])),
+                     _cell(Spread.of([run.total_steps for run in group]), 0),
+                     _cell(Spread.of(evaluations), 0),
+                     _cell(Spread.of([s / 60 for s in seconds])), f"{sum(seconds) / 60:.0f}"))
+    lines += markdown_table(("strategy", "finished", "learned at the end", "training steps", "evaluation episodes",
+                     "minutes per run", "minutes in all"), rows)
+    lines += ["", "Minutes: the curriculum's wall-clock, its first state to its last (node start-up and the "
+              "report not counted).", ""]
+
+    lines += ["## Beside the paper (its 49 objects at 4M steps, 10 seeds)", ""]
+    rows = []
+    for strategy, group in groups.items():
+        final = Spread.of([len(run.learned_tasks) for run in group])
+        paper = PAPER_LEARNED_AT_4M.get(strategy)
+        rows.append((strategy, "-" if paper is None else f"{paper}/{PAPER_TASKS} ({paper / PAPER_TASKS:.0%})",
+                     f"{final.mean:.1f}/{len(tasks)} ({final.mean / len(tasks):.0%})"))
+    lines += markdown_table(("strategy", "paper, learned at 4M", f"here, learned at {format_steps(budget)} (mean)"), rows)
+    lines.append("")
+
+    if figures_dir is not None and figures_report is not None:
+        from glocal_ros.analysis.report import GRID_PNG, LEARNED_VS_STEPS_PNG, MILESTONES_PNG
+
+        relative = figures_dir.name
+        lines += ["## Figures", "", f"From `glocal-ros report` over the same runs: [{relative}/"
+                  f"{figures_report.name}]({relative}/{figures_report.name}).", ""]
+        for title, name in (("Learned objects vs training steps", LEARNED_VS_STEPS_PNG),
+                            ("Learned objects at each milestone", MILESTONES_PNG),
+                            ("Objects learned per strategy", GRID_PNG)):
+            if (figures_dir / name).is_file():
+                lines += [f"![{title}]({relative}/{name})", ""]
+    return "\n".join(lines)
+
+
+def tabulate_curriculum_bench(run_dirs: Sequence[Path], command: str, results: Path) -> str:
+    """Read ``run_dirs``, write the report's figures beside ``results`` and return the table's markdown."""
+    from glocal_ros.analysis.report import write_report
+
+    runs = read_bench_runs(run_dirs)
+    figures_dir = results.with_suffix("")
+    figures_report = write_report([run.run_dir for run in runs], figures_dir, count_episodes=False)
+    return curriculum_bench_report(runs, command, figures_dir, figures_report)
+
+
+def bench_inputs(out: Path, merge: Sequence[Path]) -> list[Path]:
+    """OUT's run directories and those of ``merge`` (each a run directory or another bench's OUT), once each."""
+    run_dirs: list[Path] = []
+    for source in (out, *merge):
+        found = bench_run_dirs(source)
+        if source != out and not found:
+            raise ValueError(f"{source} holds no run (no run.json in it or its subdirectories)")
+        run_dirs += [d for d in found if d.resolve() not in {r.resolve() for r in run_dirs}]
+    return run_dirs
