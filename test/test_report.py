@@ -18,6 +18,8 @@ import pytest
 from glocal_ros.analysis import figures
 from glocal_ros.analysis.report import write_report
 from glocal_ros.analysis.runs import (
+    CurriculumSnapshot,
+    RunData,
     group_by_strategy,
     learned_curve_band,
     milestone_table,
@@ -260,6 +262,27 @@ def test_milestone_statistics_and_welch_test(recorded) -> None:
     assert mean[-1] == pytest.approx(2.5) and low[-1] == 2 and high[-1] == 3 and steps[-1] == TOTAL_STEPS
     single = milestone_table({"glocal": groups["glocal"]})
     assert single.reference is None and single.p_values == {}
+
+
+def test_a_run_that_finished_early_keeps_its_count_in_the_mean_until_the_budget() -> None:
+    def finished(seed: int, learned_at: list[int], total_steps: int, status: int = STATUS_FINISHED) -> RunData:
+        tasks = [f"A{i}" for i in range(len(learned_at))]
+        state = CurriculumSnapshot(
+            stamp_ns=1, log_time_ns=1, run_id=f"glocal-seed{seed}", strategy="glocal", seed=seed, status=status,
+            iteration=1, total_steps=total_steps, step_budget=TOTAL_STEPS, evaluation_episodes=0, num_clusters=0,
+            chosen_cluster=0, global_task="", local_tasks=(), learned_tasks=tuple(tasks), learned_policies=(),
+            learned_at_steps=tuple(learned_at), remaining_tasks=(), milestone_interval=INTERVAL, milestone_steps=(),
+            milestone_learned=())
+        return RunData(Path(f"glocal-{seed}"), [state])
+
+    early = finished(0, [0, 1000], total_steps=1000)  # learned both by 1k steps, then finished
+    late = finished(1, [0, 3000], total_steps=3000)
+    assert early.learned_curve()[0].tolist()[-1] == TOTAL_STEPS
+    steps, mean, _, low, high = learned_curve_band([early, late])
+    at_2k = np.searchsorted(steps, 2000, side="right") - 1
+    assert (mean[at_2k], low[at_2k], high[at_2k]) == (1.5, 1, 2)  # the early run still counts, with its 2
+    stopped = finished(2, [0], total_steps=1000, status=STATUS_TRAINING)  # interrupted: not extended
+    assert stopped.learned_curve()[0].tolist()[-1] == 1000
 
 
 def test_learned_grid_greys_tasks_not_in_the_run(recorded) -> None:

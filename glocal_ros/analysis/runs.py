@@ -257,9 +257,14 @@ class RunData:
         return sum(1 for s in self.learned_at_steps() if s <= steps)
 
     def learned_curve(self) -> tuple[np.ndarray, np.ndarray]:
-        """The learned-count step function (draw with ``steps-post``), from 0 to the final total_steps."""
+        """The learned-count step function (draw with ``steps-post``), from 0 to the final total_steps.
+
+        A finished run's count is final: its curve goes on to the step budget, as its milestones do
+        (``glocal_ros.curriculum.run``), so that a run that learned everything early is not left out of
+        the mean after it ended.
+        """
         at = self.learned_at_steps()
-        end = max(self.total_steps, at[-1] if at else 0)
+        end = max(self.total_steps, at[-1] if at else 0, self.step_budget if self.finished else 0)
         xs = np.array([0, *at, end], dtype=np.int64)
         ys = np.array([self.learned_count_at(0), *[self.learned_count_at(s) for s in at], len(at)], dtype=np.int64)
         return xs, ys

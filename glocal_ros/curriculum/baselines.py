@@ -14,7 +14,13 @@ budget is spent; a copy is saved for each task whose score passes B.
 Choices:
 - A goal ends after a chunk of finished episodes (``episode_limit``), not
   after a number of steps: ``baseline_chunk_episodes`` for ``random``, and
-  for ALP-GMM the episodes until its next refit. So ALP-GMM-10 refits every
+  for ALP-GMM the episodes until its next refit; or at the next scheduled
+  evaluation, when that comes first, so that the policy is evaluated at
+  k x ``baseline_eval_interval`` steps exactly (a lockstep learner may stop
+  up to N - 1 steps short of it), not at the end of the goal past it. Left
+  so, an ALP-GMM-250 goal (250 episodes, up to 12,500 steps at T = 50) ran
+  past several evaluations of a small budget. The next goal finishes the
+  chunk: ALP-GMM then refits after the same number of episodes. So ALP-GMM-10 refits every
   10 episodes and the next episodes are fresh draws from the refitted GMM:
   draws from one fixed GMM are independent, so drawing a chunk's tasks at
   once is drawing each episode's task from the current GMM, as the original
@@ -98,15 +104,20 @@ def run_sampled(run: Run, sampler: TaskSampler, chunk_episodes: Callable[[], int
     while not run.over:
         chunk = chunk_episodes()
         tasks = tuple(sampler.sample() for _ in range(chunk + TASKS_AHEAD))
+        to_evaluation = next_evaluation - run.state.total_steps
         result = run.train(ROLE_SAMPLED, TrainRequest(
             task="", episode_tasks=tasks, episode_limit=chunk, initial_policy=initial, output_policy=policy,
-            step_budget=chunk * max_episode_steps, stop_when_learned=False, keep_replay_buffer=True,
+            step_budget=min(chunk * max_episode_steps, to_evaluation), stop_when_learned=False,
+            keep_replay_buffer=True,
         ))
         initial = policy
         run.set_current_policy(policy)
         for episode in result.episodes:
             sampler.update(episode.task, episode.episode_return)
-        if run.state.total_steps >= next_evaluation or run.steps_left == 0:
+        # A goal cut at the evaluation's step ends there, or up to N - 1 steps short of it (lockstep).
+        cut_for_evaluation = chunk * max_episode_steps > to_evaluation and len(result.episodes) < chunk
+        if run.state.total_steps >= next_evaluation or cut_for_evaluation or run.steps_left == 0:
+            next_evaluation += config.baseline_eval_interval
             while next_evaluation <= run.state.total_steps:
                 next_evaluation += config.baseline_eval_interval
             _save_passing_tasks(run, sampler, policy)
