@@ -36,7 +36,8 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Sequence
 
-from glocal_ros.analysis.report import markdown_table, p_value_section
+from glocal_ros.analysis.report import (GRID_PNG, LEARNED_VS_STEPS_PNG, MILESTONES_PNG, markdown_table,
+                                        p_value_section)
 from glocal_ros.analysis.runs import (REFERENCE_STRATEGY, RunData, format_steps, group_by_strategy, milestone_table,
                                       read_runs)
 
@@ -61,15 +62,22 @@ def bench_run_dirs(out: Path) -> list[Path]:
     return sorted(path.parent for path in out.glob(f"*/{RUN_FILE}"))
 
 
+def _run_file(run_dir: Path) -> dict:
+    """What ``run_dir``'s ``run.json`` says (``glocal_app.processes.run_settings``); empty when it has none."""
+    from glocal_app.processes import RUN_FILE
+
+    path = run_dir / RUN_FILE
+    return json.loads(path.read_text()) if path.is_file() else {}
+
+
 def check_bench(strategies: Sequence[str], seeds: Sequence[int], preset: str, out: Path,
                 step_budget: int | None) -> None:
     """``ValueError`` for what ``experiment`` refuses, and for any run under OUT of another preset or budget."""
     from glocal_app.launch import check_experiment
-    from glocal_app.processes import RUN_FILE
 
     check_experiment(strategies, seeds, preset, out, step_budget)
     for run_dir in bench_run_dirs(out):
-        found = json.loads((run_dir / RUN_FILE).read_text())
+        found = _run_file(run_dir)
         if found.get("preset") != preset or found.get("step_budget") != step_budget:
             raise ValueError(f"{run_dir} is a run of preset {found.get('preset')} and budget "
                              f"{found.get('step_budget') or 'of its preset'}, not of preset {preset} and budget "
@@ -121,18 +129,22 @@ def _ratio(numerator: Spread | None, denominator: Spread | None) -> str:
     return f"{numerator.mean / denominator.mean:.2f}x"
 
 
-def curriculum_bench_report(runs: Sequence[RunData], command: str, figures_dir: Path | None,
-                            figures_report: Path | None) -> str:
-    """The markdown of ``bench/results/curriculum.md`` for ``runs`` (``read_bench_runs``)."""
+def curriculum_bench_report(runs: Sequence[RunData], command: str, figures_report: Path | None = None) -> str:
+    """The markdown of ``bench/results/curriculum.md`` for ``runs`` (``read_bench_runs``).
+
+    ``figures_report``: the ``report.md`` that ``glocal-ros report`` wrote over the same runs, in a
+    folder beside the table; its figures are shown.
+    """
     groups = group_by_strategy(runs)
     table = milestone_table(groups)
     tasks, budget = runs[0].tasks, runs[0].step_budget
     milestones = [step for step in table.steps if step <= budget]
     spread = {strategy: {step: Spread.of(table.values[strategy].get(step, [])) for step in milestones}
               for strategy in groups}
+    presets = sorted({str(_run_file(run.run_dir).get("preset", "?")) for run in runs})
     lines = ["# bench curriculum: every strategy at one training budget, on the real simulation", "",
              f"Command: `{command}`  ",
-             f"{len(runs)} runs of {len(groups)} strategies; "
+             f"{len(runs)} runs of {len(groups)} strategies, preset {', '.join(presets)}; "
              f"{f'all {PAPER_TASKS}' if len(tasks) == PAPER_TASKS else len(tasks)} objects ({', '.join(tasks)}); "
              f"{budget:,} training steps per run, the same prior and tasks for every run. Learned: a score above "
              f"B in an evaluation (evaluation episodes are not charged to the budget, as in the paper). Runs "
@@ -142,16 +154,16 @@ def curriculum_bench_report(runs: Sequence[RunData], command: str, figures_dir: 
               "Mean (min-max) over seeds; n = seeds that reached it.", ""]
     header = ("strategy", "seeds", *(format_steps(step) for step in milestones))
     lines += markdown_table(header, ((strategy, len(group), *(_cell(spread[strategy][step]) for step in milestones))
-                             for strategy, group in groups.items()))
+                                     for strategy, group in groups.items()))
     lines.append("")
 
     reference = spread.get(REFERENCE_STRATEGY)
     compared = [b for b in BASELINES if b in groups]
     if reference is not None and compared:
         lines += ["## GloCAL / baseline at equal budget (ratio of mean learned objects; the goal: >= 1.15x)", ""]
-        lines += markdown_table(("ratio", *(format_steps(step) for step in milestones)),
-                        ((f"glocal / {b}", *(_ratio(reference[step], spread[b][step]) for step in milestones))
-                         for b in compared))
+        lines += markdown_table(
+            ("ratio", *(format_steps(step) for step in milestones)),
+            ((f"glocal / {b}", *(_ratio(reference[step], spread[b][step]) for step in milestones)) for b in compared))
         lines.append("")
     lines += p_value_section(table, milestones)
 
@@ -166,7 +178,7 @@ def curriculum_bench_report(runs: Sequence[RunData], command: str, figures_dir: 
                      _cell(Spread.of(evaluations), 0),
                      _cell(Spread.of([s / 60 for s in seconds])), f"{sum(seconds) / 60:.0f}"))
     lines += markdown_table(("strategy", "finished", "learned at the end", "training steps", "evaluation episodes",
-                     "minutes per run", "minutes in all"), rows)
+                             "minutes per run", "minutes in all"), rows)
     lines += ["", "Minutes: the curriculum's wall-clock, its first state to its last (node start-up and the "
               "report not counted).", ""]
 
@@ -177,12 +189,12 @@ def curriculum_bench_report(runs: Sequence[RunData], command: str, figures_dir: 
         paper = PAPER_LEARNED_AT_4M.get(strategy)
         rows.append((strategy, "-" if paper is None else f"{paper}/{PAPER_TASKS} ({paper / PAPER_TASKS:.0%})",
                      f"{final.mean:.1f}/{len(tasks)} ({final.mean / len(tasks):.0%})"))
-    lines += markdown_table(("strategy", "paper, learned at 4M", f"here, learned at {format_steps(budget)} (mean)"), rows)
+    lines += markdown_table(("strategy", "paper, learned at 4M", f"here, learned at {format_steps(budget)} (mean)"),
+                            rows)
     lines.append("")
 
-    if figures_dir is not None and figures_report is not None:
-        from glocal_ros.analysis.report import GRID_PNG, LEARNED_VS_STEPS_PNG, MILESTONES_PNG
-
+    if figures_report is not None:
+        figures_dir = figures_report.parent
         relative = figures_dir.name
         lines += ["## Figures", "", f"From `glocal-ros report` over the same runs: [{relative}/"
                   f"{figures_report.name}]({relative}/{figures_report.name}).", ""]
@@ -201,7 +213,7 @@ def tabulate_curriculum_bench(run_dirs: Sequence[Path], command: str, results: P
     runs = read_bench_runs(run_dirs)
     figures_dir = results.with_suffix("")
     figures_report = write_report([run.run_dir for run in runs], figures_dir, count_episodes=False)
-    return curriculum_bench_report(runs, command, figures_dir, figures_report)
+    return curriculum_bench_report(runs, command, figures_report)
 
 
 def bench_inputs(out: Path, merge: Sequence[Path]) -> list[Path]:
