@@ -34,14 +34,14 @@ import json
 import statistics
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Sequence
+from typing import TYPE_CHECKING, Sequence
 
-from glocal_ros.analysis.report import (GRID_PNG, LEARNED_VS_STEPS_PNG, MILESTONES_PNG, markdown_table,
-                                        p_value_section)
-from glocal_ros.analysis.runs import (REFERENCE_STRATEGY, RunData, format_steps, group_by_strategy, milestone_table,
-                                      read_runs)
+from glocal_app.processes import RUN_FILE
 
-#: The preset the bench runs by default: 16 objects, six strategies x 3 seeds in about 90 minutes on 2 cores.
+if TYPE_CHECKING:
+    from glocal_ros.analysis.runs import RunData
+
+#: The preset the bench runs by default: 16 objects; six strategies x 3 seeds took 65 minutes on 2 cores.
 BENCH_PRESET = "bench"
 DEFAULT_OUT = Path("runs/bench-curriculum")
 DEFAULT_RESULTS = Path("bench/results/curriculum.md")
@@ -55,8 +55,6 @@ PAPER_TASKS = 49
 
 def bench_run_dirs(out: Path) -> list[Path]:
     """The run directories of a bench's OUT (each with a ``run.json``), or OUT itself when it is one run."""
-    from glocal_app.processes import RUN_FILE
-
     if (out / RUN_FILE).is_file():
         return [out]
     return sorted(path.parent for path in out.glob(f"*/{RUN_FILE}"))
@@ -64,8 +62,6 @@ def bench_run_dirs(out: Path) -> list[Path]:
 
 def _run_file(run_dir: Path) -> dict:
     """What ``run_dir``'s ``run.json`` says (``glocal_app.processes.run_settings``); empty when it has none."""
-    from glocal_app.processes import RUN_FILE
-
     path = run_dir / RUN_FILE
     return json.loads(path.read_text()) if path.is_file() else {}
 
@@ -86,6 +82,8 @@ def check_bench(strategies: Sequence[str], seeds: Sequence[int], preset: str, ou
 
 def read_bench_runs(run_dirs: Sequence[Path]) -> list[RunData]:
     """The runs of ``run_dirs``; ``ValueError`` when there is none, or they differ in tasks or budget."""
+    from glocal_ros.analysis.runs import read_runs  # rosbags: not at the CLI's start
+
     runs = read_runs(run_dirs, count_episodes=False)
     if not runs:
         raise ValueError(f"no readable run in {', '.join(map(str, run_dirs)) or 'no directory'}")
@@ -135,6 +133,10 @@ def curriculum_bench_report(runs: Sequence[RunData], command: str, figures_repor
     ``figures_report``: the ``report.md`` that ``glocal-ros report`` wrote over the same runs, in a
     folder beside the table; its figures are shown.
     """
+    from glocal_ros.analysis.report import (GRID_PNG, LEARNED_VS_STEPS_PNG, MILESTONES_PNG, markdown_table,
+                                            p_value_section)
+    from glocal_ros.analysis.runs import REFERENCE_STRATEGY, format_steps, group_by_strategy, milestone_table
+
     groups = group_by_strategy(runs)
     table = milestone_table(groups)
     tasks, budget = runs[0].tasks, runs[0].step_budget
