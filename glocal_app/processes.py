@@ -137,9 +137,9 @@ def claim_run_dir(run_dir: Path, settings: Mapping[str, object]) -> bool:
 
 def preset_parameters(preset: str, node: str, params_dir: Path | None = None) -> dict[str, object]:
     """The parameters a preset gives ``node`` (its ``/**/NODE`` section)."""
-    import yaml  # not at import: see the module's docstring
+    from ruamel.yaml import YAML  # not at import: see the module's docstring
 
-    document = yaml.safe_load(preset_file(preset, params_dir).read_text()) or {}
+    document = YAML(typ="safe").load(preset_file(preset, params_dir).read_text()) or {}
     return dict(document.get(f"/**/{node}", {}).get("ros__parameters", {}))
 
 
