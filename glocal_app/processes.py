@@ -112,12 +112,17 @@ def run_settings(strategy: str, preset: str, seed: int, step_budget: int | None 
     return settings
 
 
+def recorded_run_settings(run_dir: Path) -> dict[str, object] | None:
+    """What RUN_DIR's ``RUN_FILE`` records (``run_settings``); None when it holds no run."""
+    path = run_dir / RUN_FILE
+    return json.loads(path.read_text()) if path.is_file() else None
+
+
 def check_run_dir(run_dir: Path, settings: Mapping[str, object]) -> bool:
     """True when RUN_DIR holds an earlier launch of the run ``settings``; ``ValueError`` when it holds another run."""
-    path = run_dir / RUN_FILE
-    if not path.is_file():
+    found = recorded_run_settings(run_dir)
+    if found is None:
         return False
-    found = json.loads(path.read_text())
     if found != dict(settings):
         raise ValueError(f"{run_dir} holds the run {found}, not {dict(settings)}: choose another run directory (--out)")
     return True

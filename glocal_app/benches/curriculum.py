@@ -30,13 +30,12 @@ preset or budget): they would be mixed into the table.
 
 from __future__ import annotations
 
-import json
 import statistics
 from dataclasses import dataclass
 from pathlib import Path
 from typing import TYPE_CHECKING, Sequence
 
-from glocal_app.processes import RUN_FILE
+from glocal_app.processes import RUN_FILE, recorded_run_settings
 
 if TYPE_CHECKING:
     from glocal_ros.analysis.runs import RunData
@@ -60,12 +59,6 @@ def bench_run_dirs(out: Path) -> list[Path]:
     return sorted(path.parent for path in out.glob(f"*/{RUN_FILE}"))
 
 
-def _run_file(run_dir: Path) -> dict:
-    """What ``run_dir``'s ``run.json`` says (``glocal_app.processes.run_settings``); empty when it has none."""
-    path = run_dir / RUN_FILE
-    return json.loads(path.read_text()) if path.is_file() else {}
-
-
 def check_bench(strategies: Sequence[str], seeds: Sequence[int], preset: str, out: Path,
                 step_budget: int | None) -> None:
     """``ValueError`` for what ``experiment`` refuses, and for any run under OUT of another preset or budget."""
@@ -73,7 +66,7 @@ def check_bench(strategies: Sequence[str], seeds: Sequence[int], preset: str, ou
 
     check_experiment(strategies, seeds, preset, out, step_budget)
     for run_dir in bench_run_dirs(out):
-        found = _run_file(run_dir)
+        found = recorded_run_settings(run_dir) or {}
         if found.get("preset") != preset or found.get("step_budget") != step_budget:
             raise ValueError(f"{run_dir} is a run of preset {found.get('preset')} and budget "
                              f"{found.get('step_budget') or 'of its preset'}, not of preset {preset} and budget "
@@ -143,7 +136,7 @@ def curriculum_bench_report(runs: Sequence[RunData], command: str, figures_repor
     milestones = [step for step in table.steps if step <= budget]
     spread = {strategy: {step: Spread.of(table.values[strategy].get(step, [])) for step in milestones}
               for strategy in groups}
-    presets = sorted({str(_run_file(run.run_dir).get("preset", "?")) for run in runs})
+    presets = sorted({str((recorded_run_settings(run.run_dir) or {}).get("preset", "?")) for run in runs})
     lines = ["# bench curriculum: every strategy at one training budget, on the real simulation", "",
              f"Command: `{command}`  ",
              f"{len(runs)} runs of {len(groups)} strategies, preset {', '.join(presets)}; "
