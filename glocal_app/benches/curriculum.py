@@ -36,6 +36,7 @@ from pathlib import Path
 from typing import TYPE_CHECKING, Sequence
 
 from glocal_app.processes import RUN_FILE, recorded_run_settings
+from glocal_ros.tasks import NUM_TASKS
 
 if TYPE_CHECKING:
     from glocal_ros.analysis.runs import RunData
@@ -49,7 +50,6 @@ BASELINES = ("random", "alp_gmm_250", "alp_gmm_10")
 #: The paper's learned objects of 49 at 4M training steps (Fig. 6 and 7, and the ablations' text).
 PAPER_LEARNED_AT_4M = {"glocal": 49, "random": 41, "alp_gmm_250": 41, "alp_gmm_10": 42, "glocal_no_global": 39,
                        "glocal_random_cluster": 10}
-PAPER_TASKS = 49
 
 
 def bench_run_dirs(out: Path) -> list[Path]:
@@ -140,7 +140,7 @@ def curriculum_bench_report(runs: Sequence[RunData], command: str, figures_repor
     lines = ["# bench curriculum: every strategy at one training budget, on the real simulation", "",
              f"Command: `{command}`  ",
              f"{len(runs)} runs of {len(groups)} strategies, preset {', '.join(presets)}; "
-             f"{f'all {PAPER_TASKS}' if len(tasks) == PAPER_TASKS else len(tasks)} objects ({', '.join(tasks)}); "
+             f"{f'all {NUM_TASKS}' if len(tasks) == NUM_TASKS else len(tasks)} objects ({', '.join(tasks)}); "
              f"{budget:,} training steps per run, the same prior and tasks for every run. Learned: a score above "
              f"B in an evaluation (evaluation episodes are not charged to the budget, as in the paper). Runs "
              f"read: {', '.join(f'`{run.run_dir}`' for run in runs)}.", ""]
@@ -182,7 +182,7 @@ def curriculum_bench_report(runs: Sequence[RunData], command: str, figures_repor
     for strategy, group in groups.items():
         final = Spread.of([len(run.learned_tasks) for run in group])
         paper = PAPER_LEARNED_AT_4M.get(strategy)
-        rows.append((strategy, "-" if paper is None else f"{paper}/{PAPER_TASKS} ({paper / PAPER_TASKS:.0%})",
+        rows.append((strategy, "-" if paper is None else f"{paper}/{NUM_TASKS} ({paper / NUM_TASKS:.0%})",
                      f"{final.mean:.1f}/{len(tasks)} ({final.mean / len(tasks):.0%})"))
     lines += markdown_table(("strategy", "paper, learned at 4M", f"here, learned at {format_steps(budget)} (mean)"),
                             rows)
