@@ -255,6 +255,15 @@ def cmd_bench_learner(args: argparse.Namespace) -> int:
     return write_bench_report(report, args.out)
 
 
+def cmd_bench_backends(args: argparse.Namespace) -> int:
+    from glocal_app.benches.backends import backends_bench_report, run_backends_bench
+
+    rows = run_backends_bench([int(n) for n in args.envs.split(",")], args.steps, args.rounds, args.network)
+    report = backends_bench_report(rows, "glocal-ros " + " ".join(sys.argv[1:]), args.steps, args.rounds,
+                                   args.network)
+    return write_bench_report(report, args.out)
+
+
 def cmd_bench_graph(args: argparse.Namespace) -> int:
     from glocal_app.benches.graph import graph_bench_report, run_graph_bench
 
@@ -468,6 +477,15 @@ def build_parser() -> argparse.ArgumentParser:
                                help="leave out the learner_node process (its Train action) column")
     bench_learner.add_argument("--out", type=Path, default=Path("bench/results/learner.md"))
     bench_learner.set_defaults(func=cmd_bench_learner)
+    bench_backends = bench_commands.add_parser("backends", help="SAC env steps/s of stable-baselines3 (torch) and "
+                                               "SBX (JAX), side by side: how the learner's backend was chosen")
+    bench_backends.add_argument("--envs", default="1,4", help="comma-separated env counts N")
+    bench_backends.add_argument("--steps", type=int, default=2000, help="env steps timed per measurement, after a "
+                                "warm-up of batch_size + 64 + N steps")
+    bench_backends.add_argument("--rounds", type=int, default=3, help="alternating rounds; the median is reported")
+    bench_backends.add_argument("--network", choices=list(NETWORKS), default=DEFAULT_NETWORK)
+    bench_backends.add_argument("--out", type=Path, default=Path("bench/results/backends.md"))
+    bench_backends.set_defaults(func=cmd_bench_backends)
     transfer_defaults = TransferSettings()
     bench_transfer = bench_commands.add_parser(
         "transfer", help="fine-tuning the A0 prior on other objects: steps to B and collapses, recipe by recipe")

@@ -3,7 +3,7 @@
 Names resolve, in order, to the built-in ``random`` (uniform random actions,
 the chance level every learned policy must beat), the learner's own policy
 store, then the read-only stores shipped with the package (``assets/priors``:
-the A0 ``prior``). Stored policies are stable-baselines3 SAC models acting
+the A0 ``prior``). Stored policies are SAC models (SBX's) acting
 deterministically; each name keeps its loaded model until its file changes.
 """
 
@@ -58,7 +58,7 @@ class PolicyRegistry:
         return lambda observations: model.predict(observations, deterministic=True)[0]
 
     def model(self, name: str):
-        """The SB3 model of a stored policy, loaded again only when its file changed."""
+        """The SAC model of a stored policy, loaded again only when its file changed."""
         path = self.model_path(name)
         if self._models.get(name, (None,))[0] != path:
             self._models[name] = (path, self._store_of(name).load(name))

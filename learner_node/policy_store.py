@@ -1,4 +1,4 @@
-"""Named policies on disk: stable-baselines3 models plus what they are.
+"""Named policies on disk: SAC models (SBX's, stable-baselines3's layout) plus what they are.
 
 Layout: ``<root>/<name>/policy.json`` (metadata, and which model file is
 current), ``<root>/<name>/model-<version>.zip`` and, when the policy keeps
@@ -9,7 +9,7 @@ temporary file and an atomic rename, then deletes the old files. A process
 killed at any moment leaves policy.json naming complete files: the old ones
 or the new.
 
-ROS-free; loading a model imports stable-baselines3 (and torch) lazily.
+ROS-free; loading a model imports SBX (and JAX) lazily.
 """
 
 from __future__ import annotations
@@ -23,7 +23,7 @@ from typing import Any
 
 from glocal_ros.files import atomic_write
 from learner_node.replay_buffer import Experience, load_experience, save_experience
-from learner_node.sac_settings import use_torch_threads
+from learner_node.sac_settings import load_model
 
 METADATA_FILE = "policy.json"
 _NAME = re.compile(r"^[A-Za-z0-9_][A-Za-z0-9_.-]{0,127}$")
@@ -91,11 +91,8 @@ class PolicyStore:
         return self.root / name / self.record(name).model_file
 
     def load(self, name: str, **kwargs):
-        """The stable-baselines3 SAC model of ``name``, in a process whose torch runs as the learner's."""
-        from stable_baselines3 import SAC
-
-        use_torch_threads()
-        return SAC.load(self.model_path(name), device="cpu", **kwargs)
+        """The SAC model of ``name``, in a process that computes as the learner's (``sac_settings.load_model``)."""
+        return load_model(self.model_path(name), **kwargs)
 
     def experience(self, name: str) -> Experience | None:
         """The transitions ``name`` keeps; None when it keeps none."""

@@ -1,6 +1,15 @@
 """SAC settings of the project, chosen for wall-clock on a 2-core CPU.
 
-One torch thread was fastest on 2 cores (the other core steps physics);
+The backend is SBX (``sbx-rl``): stable-baselines3's SAC, its API, loop and
+replay buffers, with the networks and gradient steps in JAX, jitted. Side by
+side on this machine kind (new models learning on the grasp env with
+physics, [64, 64] / 64, one thread) it trained 2.4x as many env steps per
+second as stable-baselines3 on torch with 4 envs and 1.6x with one
+(``glocal-ros bench backends``, ``bench/results/backends.md``). Stored
+models are SBX's: a stable-baselines3 (torch) model does not load
+(``load_model`` says which library made it).
+
+One compute thread was fastest on 2 cores (the other core steps physics);
 one gradient step per env step (UTD 1) as in the paper; gamma 0.95 suits
 T = 50 step episodes with a -1 per step reward. ``gradient_steps=-1`` is
 SB3's "as many as env steps collected": one per env step whatever the
@@ -11,8 +20,8 @@ when a model is made, that is when ``glocal-ros train-prior`` trains a
 prior: ``NETWORKS`` has the paper's Stable Baselines (SB2) defaults [64, 64]
 / 64, the default since ``bench learner`` and ``bench transfer`` measured it
 (a gradient step of a few ms, against 13-16 ms for [256, 256] on one
-thread; as good a prior, 100/100 on A0 from 60k steps), and [256, 256] / 256,
-what the grasp probe of ENVIRONMENT.md learned with. A Train goal continues a stored model, whose
+thread; as good a prior), and [256, 256] / 256, what the grasp probe of
+ENVIRONMENT.md learned with. A Train goal continues a stored model, whose
 network, batch, gamma and learning rate are its own; ``FineTuning`` is
 what the goal chooses on top (SB3 leaves it to whoever loads a model): the
 batch, the learning rate, what its replay buffer starts with (SB3: nothing)
@@ -22,25 +31,75 @@ recipes ``glocal-ros bench transfer`` compares.
 
 from __future__ import annotations
 
+import os
 from dataclasses import dataclass
 from typing import Any, Literal
 
-TORCH_THREADS = 1
+#: Compute threads of the learner's process: XLA's (JAX) and torch's (stable-baselines3's buffers).
+COMPUTE_THREADS = 1
+#: XLA's CPU flags for ``COMPUTE_THREADS`` = 1; XLA reads them once, when JAX makes its CPU backend.
+XLA_ONE_THREAD_FLAGS = "--xla_cpu_multi_thread_eigen=false intra_op_parallelism_threads=1"
 
 
-def use_torch_threads() -> None:
-    """Run this process's torch on ``TORCH_THREADS`` threads.
+def sac_algorithm():
+    """The SAC class of the learner's backend (``sbx.SAC``), its process set to ``COMPUTE_THREADS``.
 
-    Besides speed, this makes a seeded evaluation a function of its seed: on
-    two threads torch splits a matrix product by how busy the threads are,
-    the sums round differently, and a long contact-rich episode can end
-    otherwise (the prior on G6 with the same seeded episodes: 14 or 15 of 20
-    from run to run on 2 threads, 16 every time on one). Whoever acts with or
-    trains a model calls it first.
+    Imported on first use: JAX takes a second to import, which every
+    ``glocal-ros`` command and node would pay. Besides speed, one thread
+    makes a seeded evaluation a function of its seed: on two threads a
+    matrix product's sums can round differently from run to run, and a long
+    contact-rich episode can end otherwise (the torch prior on G6 with the
+    same seeded episodes: 14 or 15 of 20 from run to run on 2 threads, 16
+    every time on one). Whoever acts with or trains a model gets the class
+    here first; JAX must not have made its backend before.
     """
+    flags = os.environ.get("XLA_FLAGS", "")
+    if XLA_ONE_THREAD_FLAGS not in flags:
+        os.environ["XLA_FLAGS"] = f"{flags} {XLA_ONE_THREAD_FLAGS}".strip()
     import torch
+    from sbx import SAC
 
-    torch.set_num_threads(TORCH_THREADS)
+    torch.set_num_threads(COMPUTE_THREADS)
+    return SAC
+
+
+def load_model(path, **kwargs):
+    """The SAC model saved at ``path``, loaded as ``sac_algorithm()``'s, on the CPU.
+
+    ``ValueError`` naming the library that made it when that is not the
+    learner's backend: a stable-baselines3 (torch) model is a zip of the same
+    layout that SBX cannot use.
+    """
+    made_by = saved_policy_module(path)
+    if not made_by.startswith("sbx."):
+        raise ValueError(f"{path} holds a SAC model of {made_by.split('.')[0]!r} ({made_by}); this learner "
+                         "runs SBX (sbx-rl): train the policy again with it (a prior: glocal-ros train-prior)")
+    return sac_algorithm().load(path, device="cpu", **kwargs)
+
+
+def saved_policy_module(path) -> str:
+    """The module of the policy class an SB3-layout model zip names (``sbx.sac.policies`` for SBX's SAC)."""
+    import json
+    import zipfile
+
+    try:
+        with zipfile.ZipFile(path) as archive:
+            return json.loads(archive.read("data"))["policy_class"]["__module__"]
+    except (OSError, KeyError, ValueError, zipfile.BadZipFile) as error:
+        raise ValueError(f"{path} is not a saved SAC model: {error}") from error
+
+
+def seed_keys(model, seed: int) -> None:
+    """Seed both of an SBX model's JAX keys: its gradient steps' and its policy's, which samples the actions.
+
+    SBX's ``set_random_seed`` seeds the first only (and its load seeds it
+    with the model's first seed): a loaded model would otherwise act with
+    the noise its file left off with.
+    """
+    import jax
+
+    model.key, model.policy.key = jax.random.split(jax.random.PRNGKey(seed))
+
 
 #: Everything of a new model but its ``Network``.
 SAC_KWARGS: dict[str, Any] = dict(
@@ -64,6 +123,10 @@ class Network:
     def sac_kwargs(self) -> dict[str, Any]:
         """Keyword arguments of ``stable_baselines3.SAC`` for a new model with this network."""
         return dict(SAC_KWARGS, batch_size=self.batch_size, policy_kwargs=dict(net_arch=list(self.hidden)))
+
+    def new_model(self, env, seed: int, **overrides):
+        """A new SAC model of the learner's backend with this network on ``env`` (``overrides``: other kwargs)."""
+        return sac_algorithm()("MlpPolicy", env, seed=seed, device="cpu", **dict(self.sac_kwargs(), **overrides))
 
 
 NETWORKS: dict[str, Network] = {

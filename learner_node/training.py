@@ -47,7 +47,6 @@ Choices:
 
 from __future__ import annotations
 
-import base64
 import json
 import shutil
 import time
@@ -69,7 +68,7 @@ from learner_node.fine_tuning import start_fine_tuning
 from learner_node.policies import RANDOM_POLICY, PolicyRegistry
 from learner_node.policy_store import PolicyRecord, check_name
 from learner_node.replay_buffer import add_experience, load_replay_buffer, recent_experience, save_replay_buffer
-from learner_node.sac_settings import DEFAULT_FINE_TUNING, SAC_KWARGS, FineTuning, use_torch_threads
+from learner_node.sac_settings import DEFAULT_FINE_TUNING, SAC_KWARGS, FineTuning, load_model, seed_keys
 from learner_node.updates import OverlappedUpdates
 from learner_node.vec_env import BatchVecEnv, TaskCycle
 
@@ -200,7 +199,6 @@ class Trainer:
         the first step, each interval, the end) as soon as it is scored, with the goal's training
         steps it scored the policy after: the record of what the goal's decisions were based on.
         """
-        use_torch_threads()
         finished = self._finished_before(spec, self.checkpoint_root / spec.output_policy)
         if finished is not None:
             return finished
@@ -235,11 +233,9 @@ class Trainer:
     def _model(self, spec: TrainSpec, vec_env: BatchVecEnv, checkpoint_dir: Path, state: _GoalState,
                cycle: TaskCycle):
         """The model to train and the step it resumes from (0 for a new goal)."""
-        from stable_baselines3 import SAC
-
         saved = _read_checkpoint(checkpoint_dir)
         if saved is not None and saved["spec"] == _spec_key(spec):
-            model = SAC.load(checkpoint_dir / saved["model"], env=vec_env, device="cpu")
+            model = load_model(checkpoint_dir / saved["model"], env=vec_env)
             if not load_replay_buffer(model.replay_buffer, checkpoint_dir / saved["buffer"]):
                 self._start_buffer(model, spec)
             state.__dict__.update(saved["state"])
@@ -251,7 +247,7 @@ class Trainer:
             model = self._warm[2]
             model.set_env(vec_env, force_reset=True)
             return model, 0
-        model = SAC.load(store_path, env=vec_env, device="cpu")
+        model = load_model(store_path, env=vec_env)
         self._start_buffer(model, spec)
         state.critic_warmup = self.fine_tuning.critic_warmup  # a warm model's critic has seen its data
         start_fine_tuning(model, self.fine_tuning, spec.episode_tasks or (spec.task,))
@@ -283,8 +279,8 @@ class Trainer:
 
         A goal with a seed is a function of its initial policy, its spec and
         its seed, whatever ran on the learner and the sim before it: every
-        stream it draws from starts from a seed derived from it (torch, numpy
-        and the action space through SB3's ``set_random_seed``, env k's
+        stream it draws from starts from a seed derived from it (numpy and
+        the action space through SB3's ``set_random_seed``, SBX's JAX keys, env k's
         episodes from that seed + k at the first reset; each evaluation's
         episodes from a seed of their own, see ``_evaluate_task``). A goal
         resumed from its checkpoint at step s goes on exactly as the goal that
@@ -302,10 +298,13 @@ class Trainer:
             if spec.seed is not None:
                 vec_env.seed(derived_seed(spec.seed, TRAINING_STREAM, resumed))
         elif spec.seed is not None:
-            model.set_random_seed(derived_seed(spec.seed, TRAINING_STREAM, 0))  # the vec env's first reset too
+            seed = derived_seed(spec.seed, TRAINING_STREAM, 0)
+            model.set_random_seed(seed)  # the vec env's first reset too
+            seed_keys(model, seed)
         elif not (self._warm and self._warm[2] is model):
             set_random_seed(self.seed)  # what model.set_random_seed does, less the envs' seeds
             model.action_space.seed(self.seed)
+            seed_keys(model, self.seed)
 
     def _cut_episodes(self, spec: TrainSpec, model, vec_env: BatchVecEnv, steps: int) -> None:
         """End every running episode and start new ones, as a goal resumed from a checkpoint here starts.
@@ -523,21 +522,20 @@ class _StepCallback(BaseCallback):
 
 
 def random_state(model) -> dict:
-    """Every generator a SAC goal draws from (SB3 seeds the same three): torch, numpy's global one
-    (replay buffer batches), the action space's (actions before learning starts)."""
-    import torch
-
+    """Every generator a SAC goal draws from that its saved model does not keep: SBX's key of the gradient
+    steps (its load seeds it again), numpy's global one (replay buffer batches), the action space's (actions
+    before learning starts). The policy's own key is in the model file."""
     keys, position, has_gauss, cached_gaussian = np.random.get_state()[1:]
-    return {"torch": base64.b64encode(torch.get_rng_state().numpy().tobytes()).decode(),
+    return {"jax": np.asarray(model.key).tolist(),
             "numpy": {"keys": keys.tolist(), "position": position, "has_gauss": has_gauss,
                       "cached_gaussian": cached_gaussian},
             "action_space": model.action_space.np_random.bit_generator.state}
 
 
 def restore_random_state(model, saved: dict) -> None:
-    import torch
+    import jax.numpy as jnp
 
-    torch.set_rng_state(torch.from_numpy(np.frombuffer(base64.b64decode(saved["torch"]), dtype=np.uint8).copy()))
+    model.key = jnp.asarray(saved["jax"], dtype=jnp.uint32)
     numpy = saved["numpy"]
     np.random.set_state(("MT19937", np.array(numpy["keys"], dtype=np.uint32), numpy["position"],
                          numpy["has_gauss"], numpy["cached_gaussian"]))

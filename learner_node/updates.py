@@ -15,16 +15,15 @@ before anything looks at the model (evaluation, checkpoint, store), so the
 saved models and the goal's outcome are those of the plain loop's order.
 
 A goal may owe some gradient steps as critic-only (``FineTuning.critic_warmup``):
-SB3's own ``train`` with the actor's parameters frozen, so the critics, their
-targets and the entropy coefficient update and the actor does not.
+SBX's own ``train`` with its actor updates delayed past them, so the critics
+and their targets update, and the actor and the entropy coefficient (which
+SBX updates with the actor) do not.
 """
 
 from __future__ import annotations
 
 from contextlib import contextmanager
 from typing import Iterator
-
-import torch
 
 
 class OverlappedUpdates:
@@ -67,7 +66,7 @@ class OverlappedUpdates:
         """Run the owed gradient steps now, in the order they were owed (critic-only ones come first)."""
         if self.owed_critic_only > 0:
             owed, self.owed_critic_only = self.owed_critic_only, 0
-            with frozen(self.model.actor):
+            with actor_paused(self.model, owed):
                 self.model.train(gradient_steps=owed, batch_size=self.model.batch_size)
         if self.owed > 0:
             owed, self.owed = self.owed, 0
@@ -86,13 +85,17 @@ class OverlappedUpdates:
 
 
 @contextmanager
-def frozen(module: torch.nn.Module) -> Iterator[None]:
-    """``module``'s parameters get no gradient, so its optimiser skips them (Adam moments included)."""
-    parameters = [parameter for parameter in module.parameters() if parameter.requires_grad]
-    for parameter in parameters:
-        parameter.requires_grad_(False)
+def actor_paused(model, gradient_steps: int) -> Iterator[None]:
+    """SBX's next ``gradient_steps`` update the critics only.
+
+    SBX updates the actor at the i-th gradient step of a ``train`` call when
+    ``(offset + i) % policy_delay == 0``, with ``offset = (n_updates + 1) %
+    policy_delay``: a delay longer than the call and an offset of 1 leave no
+    such step. The model's own delay and update count are back on exit.
+    """
+    policy_delay, updates = model.policy_delay, model._n_updates
+    model.policy_delay, model._n_updates = gradient_steps + 1, 0
     try:
         yield
     finally:
-        for parameter in parameters:
-            parameter.requires_grad_(True)
+        model.policy_delay, model._n_updates = policy_delay, updates + gradient_steps

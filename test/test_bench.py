@@ -1,13 +1,15 @@
-"""`glocal-ros bench learner` and `bench transfer` with tiny numbers: the tables' shape, never timings or scores."""
+"""`glocal-ros bench learner`, `bench backends` and `bench transfer` with tiny numbers: the tables' shape, never
+timings or scores."""
 
 from pathlib import Path
 
 import pytest
 
+from glocal_app.benches.backends import BACKENDS, BackendsBenchRow, backends_bench_report, run_backends_bench
 from glocal_app.benches.learner import LearnerBenchRow, learner_bench_report, run_learner_bench
 from glocal_app.benches.transfer import (TransferGoal, TransferSettings, read_transfer_goals, run_transfer_bench,
                                         run_transfer_graph, transfer_bench_report)
-from glocal_app.cli import build_parser, cmd_bench_learner, cmd_bench_transfer
+from glocal_app.cli import build_parser, cmd_bench_backends, cmd_bench_learner, cmd_bench_transfer
 from glocal_ros.paths import assets_dir
 from learner_node.policy_store import PolicyStore
 
@@ -50,6 +52,39 @@ def test_bench_learner_command_line():
                                       "--no-learner-node", "--out", "x.md"])
     assert args.func is cmd_bench_learner
     assert (args.envs, args.steps, args.rounds, args.no_learner_node, args.out) == ("1,2", 100, 2, True, Path("x.md"))
+
+
+def test_bench_backends_times_both_libraries_learning_on_the_grasp_env():
+    (row,) = run_backends_bench([2], steps=20, rounds=1)
+    assert row.num_envs == 2 and set(row.rounds) == set(BACKENDS)
+    assert all(len(rates) == 1 and rates[0] > 0 for rates in row.rounds.values())
+
+    report = backends_bench_report([row], "glocal-ros bench backends --envs 2", steps=20, rounds=1)
+    assert report.splitlines()[0].startswith("# bench backends")
+    assert "Command: `glocal-ros bench backends --envs 2`" in report
+    table = [line for line in report.splitlines() if line.startswith("|")]
+    assert len(table) == 3 and all(line.count("|") == 5 for line in table)
+    assert any(line.startswith("- N=2: stable-baselines3 ") for line in report.splitlines())
+
+
+def test_bench_backends_ratio_is_sbx_over_stable_baselines3_of_the_medians():
+    row = BackendsBenchRow(4, {"stable-baselines3": (100.0, 150.0, 120.0), "sbx": (300.0, 200.0, 240.0)})
+    assert row.ratio == pytest.approx(2.0)
+    report = backends_bench_report([row], "glocal-ros bench backends", steps=10, rounds=3)
+    (line,) = [line for line in report.splitlines() if line.startswith("| 4 ")]
+    assert [cell.strip() for cell in line.strip("|").split("|")] == ["4", "120.0", "240.0", "2.00"]
+    assert "(ratios in the same round: 3.00, 1.33, 2.00)" in report
+
+
+def test_bench_backends_command_line_and_an_unknown_backend():
+    from glocal_app.benches.backends import sac_class
+
+    args = build_parser().parse_args(["bench", "backends", "--envs", "1,4", "--network", "256x256"])
+    assert args.func is cmd_bench_backends and (args.envs, args.network) == ("1,4", "256x256")
+    with pytest.raises(SystemExit):
+        build_parser().parse_args(["bench", "backends", "--network", "32x32"])
+    with pytest.raises(ValueError, match="stable-baselines3, sbx"):
+        sac_class("tensorflow")
 
 
 def test_bench_transfer_runs_every_arm_on_the_same_episodes_and_tabulates_them(tmp_path):

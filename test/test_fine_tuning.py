@@ -1,15 +1,18 @@
 """What a goal does to the stored model before its first step (``learner_node.fine_tuning``), on the shipped
-prior's real weights and Adam state, and that acting with a stored policy runs torch on one thread."""
+prior's real weights and Adam state, and that acting with a stored policy computes on the learner's one thread."""
 
+import os
+
+import numpy as np
 import pytest
 import torch
 
 from glocal_ros.paths import assets_dir
 from glocal_ros.tasks import task_index
-from learner_node.fine_tuning import first_layers, start_fine_tuning
+from learner_node.fine_tuning import input_layers, start_fine_tuning
 from learner_node.policies import PolicyRegistry
 from learner_node.policy_store import PolicyStore
-from learner_node.sac_settings import TORCH_THREADS, FineTuning, fine_tuning_recipe
+from learner_node.sac_settings import COMPUTE_THREADS, XLA_ONE_THREAD_FLAGS, FineTuning, fine_tuning_recipe
 from learner_node.training import Trainer, TrainSpec
 from sim_node.batch import BatchedEnvs
 from sim_node.grasp_env import GraspEnv
@@ -22,46 +25,49 @@ def prior():
     return PolicyStore(assets_dir() / "priors").load("prior")
 
 
-def weights(model) -> list[torch.Tensor]:
-    return [layer.weight.detach().clone() for layer, _ in first_layers(model)]
-
-
 def test_a_new_task_bit_starts_as_the_mean_of_the_trained_ones_and_nothing_else_moves(prior):
-    before = weights(prior)
-    (actor_layer, actor_optimizer), *_ = first_layers(prior)
-    second_before = actor_optimizer.state[actor_layer.weight]["exp_avg_sq"].clone()
-    assert second_before[:, A0].any() and not second_before[:, C4].any(), "the prior trained on A0 only"
+    before = input_layers(prior)
+    assert len(before) == 3, "the actor and two critics"
+    for layer in before:
+        assert layer.second_moments[A0].any() and not layer.second_moments[C4].any(), "the prior trained on A0 only"
 
     start_fine_tuning(prior, FineTuning(new_task_inputs="trained-mean"), ["C4", "C4"])
 
-    for (layer, optimizer), old in zip(first_layers(prior), before):
-        assert torch.equal(layer.weight[:, C4], old[:, A0])  # the one trained bit's weights
-        changed = (layer.weight != old).any(dim=0).nonzero().flatten().tolist()
+    for layer, old in zip(input_layers(prior), before):
+        np.testing.assert_array_equal(layer.weights[C4], old.weights[A0])  # the one trained bit's weights
+        changed = (layer.weights != old.weights).any(axis=1).nonzero()[0].tolist()
         assert changed == [C4], "only the goal's new bit"
-        state = optimizer.state[layer.weight]
-        assert torch.equal(state["exp_avg_sq"][:, C4], state["exp_avg_sq"][:, A0])
-        assert not state["exp_avg"][:, C4].any()
+        np.testing.assert_array_equal(layer.second_moments[C4], layer.second_moments[A0])
+        assert not layer.first_moments[C4].any()
+        np.testing.assert_array_equal(np.delete(layer.first_moments, C4, axis=0),
+                                      np.delete(old.first_moments, C4, axis=0))
 
     # A bit trained since keeps its own weights; a further new bit gets the mean of both trained ones.
     start_fine_tuning(prior, FineTuning(new_task_inputs="trained-mean"), ["C4", "G6"])
-    layer = actor_layer
-    assert torch.allclose(layer.weight[:, G6], (before[0][:, A0] + layer.weight[:, C4]) / 2)
+    actor = input_layers(prior)[0]
+    np.testing.assert_allclose(actor.weights[G6], (before[0].weights[A0] + actor.weights[C4]) / 2, rtol=1e-6)
 
 
 def test_initial_task_inputs_and_stored_moments_leave_the_model_as_it_was_loaded(prior):
-    before = weights(prior)
+    before = input_layers(prior)
     start_fine_tuning(prior, FineTuning(), ["C4"])
-    assert all(torch.equal(layer.weight, old) for (layer, _), old in zip(first_layers(prior), before))
-    assert all(prior.actor.optimizer.state[layer.weight] for layer, _ in first_layers(prior)[:1])
+    for layer, old in zip(input_layers(prior), before):
+        for array, old_array in zip((layer.weights, layer.first_moments, layer.second_moments),
+                                    (old.weights, old.first_moments, old.second_moments)):
+            np.testing.assert_array_equal(array, old_array)
 
 
 def test_fresh_moments_and_unseen_moments_as_the_bias(prior):
-    layer, optimizer = first_layers(prior)[0]
-    bias_second = optimizer.state[layer.bias]["exp_avg_sq"].clone()
+    bias_second = np.array(prior.policy.actor_state.opt_state.inner_state[0].nu["params"]["Dense_0"]["bias"])
     start_fine_tuning(prior, FineTuning(optimizers="unseen-as-bias"), ["C4"])
-    assert torch.equal(optimizer.state[layer.weight]["exp_avg_sq"][:, C4], bias_second)
+    actor = input_layers(prior)[0]
+    np.testing.assert_array_equal(actor.second_moments[C4], bias_second)
+    assert actor.second_moments[A0].any() and not np.array_equal(actor.second_moments[A0], bias_second)
     start_fine_tuning(prior, FineTuning(optimizers="fresh"), ["C4"])
-    assert len(prior.actor.optimizer.state) == 0 and len(prior.critic.optimizer.state) == 0
+    for layer in input_layers(prior):
+        assert not layer.first_moments.any() and not layer.second_moments.any()
+    for state in (prior.policy.actor_state, prior.policy.qf_state):
+        assert int(state.opt_state.inner_state[0].count) == 0
 
 
 def test_unknown_starts_are_refused_with_the_choices():
@@ -84,14 +90,18 @@ def test_a_goal_with_task_inputs_trains_the_new_bit_from_the_known_one(tmp_path)
     finally:
         envs.close()
     assert outcome.completed
-    (layer, optimizer), (prior_layer, _) = first_layers(policies.model("b1"))[0], first_layers(prior)[0]
-    distance_to_a0 = (layer.weight[:, b1] - prior_layer.weight[:, A0]).abs().max().item()
+    layer, prior_layer = input_layers(policies.model("b1"))[0], input_layers(prior)[0]
+    distance_to_a0 = np.abs(layer.weights[b1] - prior_layer.weights[A0]).max()
     assert 0 < distance_to_a0 < 0.05  # ten updates of at most a few learning rates each
-    assert (layer.weight[:, b1] - prior_layer.weight[:, b1]).abs().max().item() > 0.05
-    assert optimizer.state[layer.weight]["exp_avg_sq"][:, b1].any()
+    assert np.abs(layer.weights[b1] - prior_layer.weights[b1]).max() > 0.05
+    assert layer.second_moments[b1].any()
 
 
-def test_acting_with_a_stored_policy_runs_torch_on_the_learners_threads():
+def test_acting_with_a_stored_policy_computes_on_the_learners_threads(monkeypatch):
+    """XLA reads its flags once, when JAX makes its CPU backend: set before any model is loaded."""
+    monkeypatch.setenv("XLA_FLAGS", "--xla_cpu_enable_fast_math=false")
     torch.set_num_threads(2)
     PolicyRegistry(PolicyStore(assets_dir() / "priors")).load("prior")
-    assert torch.get_num_threads() == TORCH_THREADS
+    # The user's flags are kept.
+    assert os.environ["XLA_FLAGS"] == f"--xla_cpu_enable_fast_math=false {XLA_ONE_THREAD_FLAGS}"
+    assert torch.get_num_threads() == COMPUTE_THREADS

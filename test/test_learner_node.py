@@ -11,7 +11,7 @@ from node_common.calls import call
 
 @pytest.fixture
 def policy_dir(tmp_path):
-    """A policy store holding one (untrained) SAC policy, 'untrained'."""
+    """A policy store holding one (untrained) SAC policy, 'untrained', and one stable-baselines3 (torch) made."""
     from stable_baselines3 import SAC
 
     from learner_node.policy_store import PolicyRecord, PolicyStore
@@ -19,8 +19,10 @@ def policy_dir(tmp_path):
     from sim_node.grasp_env import GraspEnv
 
     env = GraspEnv("A0")
-    model = SAC("MlpPolicy", env, seed=0, device="cpu", **dict(network(DEFAULT_NETWORK).sac_kwargs(), buffer_size=100))
+    model = network(DEFAULT_NETWORK).new_model(env, 0, buffer_size=100)
     PolicyStore(tmp_path / "policies").save(model, PolicyRecord(name="untrained", task="A0"))
+    torch_made = SAC("MlpPolicy", env, seed=0, device="cpu", buffer_size=100)
+    PolicyStore(tmp_path / "policies").save(torch_made, PolicyRecord(name="torch_made", task="A0"))
     env.close()
     return tmp_path / "policies"
 
@@ -68,6 +70,7 @@ def test_evaluate_a_stored_policy_records_its_score(learner, ros_node, policy_di
     ({"policy": "random", "tasks": []}, "no task"),
     ({"policy": "random", "tasks": ["A0", "A0"]}, "repeat"),
     ({"policy": "random", "tasks": ["A0"], "episodes": 51}, "max_eval_episodes"),
+    ({"policy": "torch_made", "tasks": ["A0"]}, "holds a SAC model of 'stable_baselines3'"),
 ])
 def test_bad_evaluate_is_answered_and_the_node_keeps_serving(learner, request_fields, message):
     process, evaluate = learner

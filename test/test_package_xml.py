@@ -37,6 +37,9 @@ PYTHON_KEYS: dict[str, str | None] = {
     "pybullet_utils": "python3-pybullet-pip",
     "gymnasium": "python3-gymnasium-pip",
     "stable_baselines3": "python3-stable-baselines3-pip",
+    "sbx": None,
+    "jax": None,
+    "flax": None,
     "rosbags": "python3-rosbags-pip",
     "trimesh": "python3-trimesh-pip",
     "mcap": None,
@@ -44,7 +47,8 @@ PYTHON_KEYS: dict[str, str | None] = {
     "threadpoolctl": None,  # scikit-learn's own dependency
 }
 #: How package.xml's comment names a dependency without a key (the pip name).
-PIP_NAMES = {"mcap": "mcap", "fast_simplification": "fast-simplification", "threadpoolctl": "threadpoolctl"}
+PIP_NAMES = {"mcap": "mcap", "fast_simplification": "fast-simplification", "threadpoolctl": "threadpoolctl",
+             "sbx": "sbx-rl", "jax": "jax", "flax": "flax"}
 OWN = {*ROOMS, "glocal_interfaces"}
 
 

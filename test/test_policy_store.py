@@ -1,4 +1,4 @@
-"""The policy store: named SB3 policies on disk, written atomically."""
+"""The policy store: named SAC policies on disk, written atomically."""
 
 import json
 import subprocess
@@ -6,8 +6,6 @@ import sys
 
 import numpy as np
 import pytest
-from stable_baselines3 import SAC
-
 from learner_node.policy_store import PolicyRecord, PolicyStore, UnknownPolicyError
 from learner_node.sac_settings import DEFAULT_NETWORK, network
 from sim_node.grasp_env import GraspEnv
@@ -16,7 +14,7 @@ from sim_node.grasp_env import GraspEnv
 @pytest.fixture(scope="module")
 def model():
     env = GraspEnv("A0")
-    yield SAC("MlpPolicy", env, seed=0, device="cpu", **dict(network(DEFAULT_NETWORK).sac_kwargs(), buffer_size=100))
+    yield network(DEFAULT_NETWORK).new_model(env, 0, buffer_size=100)
     env.close()
 
 
@@ -31,6 +29,19 @@ def test_save_list_load_update(tmp_path, model):
     np.testing.assert_allclose(store.load("G1").predict(observation, deterministic=True)[0],
                                model.predict(observation, deterministic=True)[0], atol=1e-6)
     assert store.update("G1", last_score=80.0, last_score_task="B2").last_score == 80.0
+
+
+def test_a_model_of_another_library_is_refused_on_load_naming_it(tmp_path, model):
+    from stable_baselines3 import SAC
+
+    store = PolicyStore(tmp_path)
+    store.save(SAC("MlpPolicy", model.get_env(), seed=0, device="cpu", buffer_size=100),
+               PolicyRecord(name="torch_made"))
+    with pytest.raises(ValueError, match="holds a SAC model of 'stable_baselines3'.*runs SBX"):
+        store.load("torch_made")
+    (tmp_path / "torch_made" / store.record("torch_made").model_file).write_bytes(b"not a zip")
+    with pytest.raises(ValueError, match="is not a saved SAC model"):
+        store.load("torch_made")
 
 
 def test_overwrite_keeps_one_complete_model(tmp_path, model):
@@ -68,7 +79,6 @@ def test_a_kill_during_save_never_corrupts_the_store(tmp_path, model):
     # A process killed mid-save (SIGKILL right after it started writing the new model).
     script = (
         "import os, signal, sys\n"
-        "from stable_baselines3 import SAC\n"
         "from learner_node.policy_store import PolicyStore, PolicyRecord\n"
         "store = PolicyStore(sys.argv[1])\n"
         "class Dying:\n"

@@ -16,7 +16,8 @@ def test_a_prior_has_the_chosen_network_and_resumes_from_its_checkpoint(tmp_path
     model = train_prior(lambda: GraspEnv("A0"), ScriptedGraspPolicy().act, tmp_path,
                         PriorConfig(**TINY, network="64x64"))
     assert model.policy_kwargs["net_arch"] == list(small.hidden) and model.batch_size == small.batch_size
-    assert [layer.out_features for layer in model.actor.latent_pi if hasattr(layer, "out_features")] == [64, 64]
+    hidden = model.policy.actor_state.params["params"]
+    assert [hidden[layer]["kernel"].shape[1] for layer in ("Dense_0", "Dense_1")] == [64, 64]
     assert model.num_timesteps == 80
     assert (tmp_path / "checkpoint.zip").is_file() and (tmp_path / "replay_buffer.pkl").is_file()
 

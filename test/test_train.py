@@ -290,10 +290,13 @@ GRASPING_SIM = dict(max_steps=50)
 
 @pytest.mark.parametrize("graph", [GRASPING_SIM], indirect=True)
 def test_evaluations_inside_a_goal_score_as_learner_evaluate_does(graph, ros_node):
-    """Before any gradient step (with SB3's start, random-first, updates start after a batch of 256
-    transitions) an evaluation inside the goal scores the prior itself; it must score as a standalone
-    learner/evaluate of the prior, on the feedback, on glocal/evaluations and in the sim's eval
-    EpisodeRecords."""
+    """Before any gradient step (with SB3's start, random-first, updates start after a batch of
+    transitions, 64 from the shipped prior) an evaluation inside the goal scores the prior itself; it must
+    score as a standalone learner/evaluate of the prior, on the feedback, on glocal/evaluations and in the
+    sim's eval EpisodeRecords."""
+    from learner_node.sac_settings import DEFAULT_NETWORK, NETWORKS
+
+    budget = NETWORKS[DEFAULT_NETWORK].batch_size - 4  # the shipped prior's batch, less a vector step
     graph["learner"].stop()
     learner = graph["start_learner"](fine_tuning="random-first")
     evaluations = evaluations_of(ros_node, "trained")
@@ -302,7 +305,8 @@ def test_evaluations_inside_a_goal_score_as_learner_evaluate_does(graph, ros_nod
         EpisodeRecord, names.EPISODES,
         lambda record: eval_records.append(record) if record.phase == PHASE_EVAL and record.policy_name == "trained"
         else None, qos.EPISODES)
-    goal = Goal(graph["train"], train_goal(step_budget=200, eval_interval=100, eval_episodes=20, threshold=19.5))
+    goal = Goal(graph["train"], train_goal(step_budget=budget, eval_interval=budget // 2, eval_episodes=20,
+                                           threshold=19.5))
     status, result = goal.result(300, processes=[learner])
     assert status == GoalStatus.STATUS_SUCCEEDED, result.message
     standalone = call(graph["evaluate"], Evaluate.Request(policy="prior", tasks=["A0"], episodes=20), 300)
@@ -422,7 +426,8 @@ def test_a_goal_resumed_from_its_checkpoint_ends_as_the_uninterrupted_goal(tmp_p
     with the same episodes, evaluations and weights, as a learner killed after the checkpoint would."""
     import shutil
 
-    import torch
+    import jax
+    import numpy as np
 
     from glocal_ros.paths import assets_dir
     from learner_node.evaluation import evaluate
@@ -463,5 +468,7 @@ def test_a_goal_resumed_from_its_checkpoint_ends_as_the_uninterrupted_goal(tmp_p
     assert (resumed.learned, resumed.score, resumed.steps_used) == \
         (uninterrupted.learned, uninterrupted.score, uninterrupted.steps_used)
     assert resumed.episodes == uninterrupted.episodes
-    for name, weights in model.policy.state_dict().items():
-        assert torch.equal(weights, resumed_model.policy.state_dict()[name]), name
+    for name in ("actor_state", "qf_state"):
+        for weights, resumed_weights in zip(*(jax.tree_util.tree_leaves(getattr(each.policy, name).params)
+                                              for each in (model, resumed_model))):
+            np.testing.assert_array_equal(weights, resumed_weights, err_msg=name)

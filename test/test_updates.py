@@ -38,7 +38,7 @@ class SplitSteps:
 
 
 def test_each_steps_updates_run_during_the_next_step_and_the_last_at_the_end(tmp_path, monkeypatch):
-    from stable_baselines3 import SAC
+    from sbx import SAC
 
     num_envs = 2
     envs = SplitSteps(BatchedEnvs(lambda i: GraspEnv("A0"), num_envs, "A0"))
@@ -77,7 +77,7 @@ def test_a_recipe_chooses_the_first_actions_and_the_rate_and_updates_wait_for_a_
     the first gradient step comes once the buffer holds a batch, so both update equally often. A recipe's batch
     (None: the stored model's own) is the batch of every update."""
     from gymnasium.spaces import Box
-    from stable_baselines3 import SAC
+    from sbx import SAC
 
     tuning = recipe if isinstance(recipe, FineTuning) else fine_tuning_recipe(recipe)
     num_envs = 2
@@ -113,7 +113,8 @@ def test_a_recipe_chooses_the_first_actions_and_the_rate_and_updates_wait_for_a_
     assert stored.batch_size == batch
     rate = tuning.learning_rate or prior.learning_rate
     assert stored.learning_rate == rate
-    assert stored.actor.optimizer.param_groups[0]["lr"] == pytest.approx(rate)
+    for state in (stored.policy.actor_state, stored.policy.qf_state):
+        assert state.opt_state.hyperparams["learning_rate"] == pytest.approx(rate)
 
 
 def test_an_unknown_recipe_or_setting_is_refused_with_the_choices():
@@ -130,21 +131,21 @@ def test_an_unknown_recipe_or_setting_is_refused_with_the_choices():
 def test_critic_warmup_leaves_the_actor_alone_for_the_first_steps_then_updates_both(tmp_path, monkeypatch):
     """The gradient steps owed for a goal's first ``critic_warmup`` steps move the critics and not the actor;
     every later one moves both; the goal does as many gradient steps as without a warm-up."""
-    import torch
-    from stable_baselines3 import SAC
+    import jax
+    from sbx import SAC
 
-    def flat(module):
-        return torch.cat([parameter.detach().flatten() for parameter in module.parameters()]).clone()
+    def flat(state):
+        return np.concatenate([np.ravel(leaf) for leaf in jax.tree_util.tree_leaves(state.params)])
 
     num_envs, batch, warmup, step_budget = 2, 32, 60, 100
     calls: list[tuple[int, bool, bool]] = []  # (gradient steps, the actor moved, the critic moved)
     real_train = SAC.train
 
     def noted_train(model, gradient_steps, batch_size=64):
-        actor, critic = flat(model.actor), flat(model.critic)
+        actor, critic = flat(model.policy.actor_state), flat(model.policy.qf_state)
         real_train(model, gradient_steps, batch_size)
-        calls.append((gradient_steps, not torch.equal(actor, flat(model.actor)),
-                      not torch.equal(critic, flat(model.critic))))
+        calls.append((gradient_steps, not np.array_equal(actor, flat(model.policy.actor_state)),
+                      not np.array_equal(critic, flat(model.policy.qf_state))))
 
     monkeypatch.setattr(SAC, "train", noted_train)
     envs = BatchedEnvs(lambda i: GraspEnv("A0"), num_envs, "A0")
@@ -168,7 +169,7 @@ def test_critic_warmup_leaves_the_actor_alone_for_the_first_steps_then_updates_b
 def test_parent_experience_starts_the_buffer_and_the_stored_policy_keeps_the_newest(tmp_path, monkeypatch):
     """The "parent-experience" way: the goal's buffer starts with its initial policy's kept transitions, so
     updates start at the first step; the policy it stores keeps the newest transitions, its own last."""
-    from stable_baselines3 import SAC
+    from sbx import SAC
 
     from learner_node.prior import collect_experience
 

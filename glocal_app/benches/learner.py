@@ -1,7 +1,7 @@
 """``glocal-ros bench learner``: SAC env steps/s with updates, in-process vs through sim_node.
 
 For each N, the same Train goal (SAC from the shipped A0 ``prior`` on A0, the
-project's ``SAC_KWARGS``, one torch thread) runs on N envs three ways:
+project's ``SAC_KWARGS``, one compute thread) runs on N envs three ways:
 
 - in-process: the ``Trainer`` here on a ``BatchedEnvs`` here;
 - through sim_node: the same ``Trainer`` here on a ``SimClient`` of a sim_node
@@ -52,7 +52,7 @@ from glocal_ros.sim_contract import BatchStepper
 from node_common.runner import spinning_node
 from learner_node.policies import PolicyRegistry
 from learner_node.policy_store import PolicyStore
-from learner_node.sac_settings import DEFAULT_NETWORK, NETWORKS, SAC_KWARGS, TORCH_THREADS
+from learner_node.sac_settings import DEFAULT_NETWORK, NETWORKS, SAC_KWARGS, COMPUTE_THREADS
 from learner_node.training import Trainer, TrainSpec
 
 #: Env steps of a goal after the update-free warm-up before the clock starts.
@@ -238,7 +238,7 @@ def learner_bench_report(rows: Sequence[LearnerBenchRow], command: str, steps: i
         f"{time.strftime('%Y-%m-%d %H:%M')}, Python {sys.version.split()[0]}, {os.cpu_count()} CPU cores. "
         f"Load average at the end {os.getloadavg()[0]:.1f} (the machine is shared). "
         f"One Train goal per measurement: SAC from `{INITIAL_POLICY}` on {TASK} (batch {batch_size}, "
-        f"{gradient_steps} per batch of N env steps, {TORCH_THREADS} torch thread); "
+        f"{gradient_steps} per batch of N env steps, {COMPUTE_THREADS} compute thread, SBX); "
         f"{steps} env steps timed after {batch_size} + {SETTLE_STEPS} + N warm-up steps (updates start after "
         f"{batch_size}); model loading, the warm-up, the final evaluation and storing are not timed. "
         f"*in-process* and *via sim_node* run the Trainer in the bench process (envs in it, or a sim_node "

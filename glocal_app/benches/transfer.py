@@ -186,7 +186,7 @@ def run_transfer_bench(recipes: Sequence[str], tasks: Sequence[str], seeds: Sequ
     work = [(recipe, prior, task, seed, settings, prior_store)
             for task in tasks for seed in seeds for prior in priors for recipe in recipes]
     goals = []
-    # Spawned workers: pybullet and torch do not survive a fork of a process that uses them.
+    # Spawned workers: pybullet, torch and JAX do not survive a fork of a process that uses them.
     with ProcessPoolExecutor(max_workers=jobs, mp_context=get_context("spawn")) as pool:
         for goal in pool.map(_run_goal, work):
             log(_goal_line(goal))
