@@ -31,7 +31,9 @@ recipes ``glocal-ros bench transfer`` compares.
 
 from __future__ import annotations
 
+import json
 import os
+import zipfile
 from dataclasses import dataclass
 from typing import Any, Literal
 
@@ -79,9 +81,6 @@ def load_model(path, **kwargs):
 
 def saved_policy_module(path) -> str:
     """The module of the policy class an SB3-layout model zip names (``sbx.sac.policies`` for SBX's SAC)."""
-    import json
-    import zipfile
-
     try:
         with zipfile.ZipFile(path) as archive:
             return json.loads(archive.read("data"))["policy_class"]["__module__"]
