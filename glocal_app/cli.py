@@ -390,6 +390,14 @@ def cmd_collect_experience(args: argparse.Namespace) -> int:
     return 0
 
 
+def _add_rate_arguments(parser: argparse.ArgumentParser, envs: str, steps: int) -> None:
+    """The env counts, timed steps and rounds of a bench that times SAC learning (learner, backends)."""
+    parser.add_argument("--envs", default=envs, help="comma-separated env counts N")
+    parser.add_argument("--steps", type=int, default=steps, help="env steps timed per measurement, after a "
+                        "warm-up of batch_size + 64 + N steps")
+    parser.add_argument("--rounds", type=int, default=3, help="alternating rounds; the median is reported")
+
+
 def build_parser() -> argparse.ArgumentParser:
     from glocal_ros.analysis.report import add_report_command
 
@@ -469,20 +477,14 @@ def build_parser() -> argparse.ArgumentParser:
     bench_graph.set_defaults(func=cmd_bench_graph)
     bench_learner = bench_commands.add_parser("learner", help="SAC env steps/s with updates, in-process vs through "
                                               "sim_node and learner_node")
-    bench_learner.add_argument("--envs", default="1,2,4", help="comma-separated env counts N")
-    bench_learner.add_argument("--steps", type=int, default=300, help="env steps timed per measurement, after a "
-                               "warm-up of batch_size + 64 + N steps")
-    bench_learner.add_argument("--rounds", type=int, default=3, help="alternating rounds; the median is reported")
+    _add_rate_arguments(bench_learner, envs="1,2,4", steps=300)
     bench_learner.add_argument("--no-learner-node", action="store_true",
                                help="leave out the learner_node process (its Train action) column")
     bench_learner.add_argument("--out", type=Path, default=Path("bench/results/learner.md"))
     bench_learner.set_defaults(func=cmd_bench_learner)
     bench_backends = bench_commands.add_parser("backends", help="SAC env steps/s of stable-baselines3 (torch) and "
                                                "SBX (JAX), side by side: how the learner's backend was chosen")
-    bench_backends.add_argument("--envs", default="1,4", help="comma-separated env counts N")
-    bench_backends.add_argument("--steps", type=int, default=2000, help="env steps timed per measurement, after a "
-                                "warm-up of batch_size + 64 + N steps")
-    bench_backends.add_argument("--rounds", type=int, default=3, help="alternating rounds; the median is reported")
+    _add_rate_arguments(bench_backends, envs="1,4", steps=2000)
     bench_backends.add_argument("--network", choices=list(NETWORKS), default=DEFAULT_NETWORK)
     bench_backends.add_argument("--out", type=Path, default=Path("bench/results/backends.md"))
     bench_backends.set_defaults(func=cmd_bench_backends)
