@@ -30,6 +30,7 @@ from glocal_ros.curriculum.codes import BASELINE_TASKS
 from glocal_ros.curriculum.journal import JournaledLearner
 from glocal_ros.files import atomic_write
 from glocal_ros.paths import ros_home
+from glocal_ros.sim_contract import DEFAULT_EPISODE_STEPS
 from glocal_ros.curriculum.run import Assignment, Run, RunConfig, RunState
 from glocal_ros.curriculum.strategies import STRATEGIES, run_strategy
 from glocal_ros.tasks import parse_task_list
@@ -45,7 +46,7 @@ class CurriculumNode(Node):
     def __init__(self) -> None:
         super().__init__("curriculum_node")
         self.config = self._declare_run_config()
-        self.max_episode_steps = declare(self, "max_episode_steps", 50,
+        self.max_episode_steps = declare(self, "max_episode_steps", DEFAULT_EPISODE_STEPS,
                                          "T of the sim's envs: the baselines size their goals with it",
                                          min_value=1, max_value=100_000)
         self.learner_timeout = declare(self, "learner_timeout_sec", 600.0,

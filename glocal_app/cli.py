@@ -14,13 +14,14 @@ from pathlib import Path
 
 from glocal_app.bag_cli import add_bag_commands
 from glocal_app.benches.curriculum import BENCH_PRESET, DEFAULT_OUT, DEFAULT_RESULTS
-from glocal_app.benches.transfer import INITIAL_POLICY, TRANSFER_TASKS, TransferSettings
+from glocal_app.benches.transfer import INITIAL_POLICY, PROFILE_RECIPE, TRANSFER_TASKS, TransferSettings
 from glocal_app.nodes import NODES
 from glocal_ros.curriculum.codes import STRATEGY_NAMES
 from glocal_ros.curriculum.learner import passes_threshold
 from glocal_ros.paths import assets_dir, objects_dir
 from glocal_ros.tasks import parse_task_list, sorted_tasks
 from learner_node.prior import PriorConfig
+from learner_node.profiles import DEFAULT_PROFILE, PROFILES, learner_profile
 from learner_node.sac_settings import (DEFAULT_NETWORK, DEFAULT_RECIPE, EXPERIENCE_TRANSITIONS, FINE_TUNING_RECIPES,
                                        NETWORKS)
 
@@ -66,7 +67,7 @@ def cmd_evaluate(args: argparse.Namespace) -> int:
 def cmd_launch(args: argparse.Namespace) -> int:
     from glocal_app.launch import launch
 
-    graph = dict(namespace=args.namespace, use_sim_time=args.use_sim_time)
+    graph = dict(namespace=args.namespace, use_sim_time=args.use_sim_time, learner_profile=args.profile)
     if args.watchdog is None:
         return launch(args.strategy, args.preset, args.seed, args.out, **graph)
     if args.watchdog <= 0:
@@ -78,7 +79,7 @@ def cmd_experiment(args: argparse.Namespace) -> int:
     from glocal_app.launch import experiment
 
     return experiment(args.strategies, args.seeds, args.preset, args.out, namespace=args.namespace,
-                      use_sim_time=args.use_sim_time, step_budget=args.budget)
+                      use_sim_time=args.use_sim_time, step_budget=args.budget, learner_profile=args.profile)
 
 
 def _name_list(text: str) -> list[str]:
@@ -113,6 +114,14 @@ def add_graph_arguments(parser: argparse.ArgumentParser) -> None:
                         help="sim_node and recorder_node on the sim's clock (/clock, /NS/clock under a "
                              "namespace), which advances by the control period per step; the learner's and the "
                              "curriculum's timeouts stay wall-clock")
+    add_profile_argument(parser, default=None)
+
+
+def add_profile_argument(parser: argparse.ArgumentParser, default: str | None = DEFAULT_PROFILE) -> None:
+    """``--profile``: the learner profile; a default of None leaves it to the preset."""
+    parser.add_argument("--profile", default=default, choices=list(PROFILES),
+                        help="the learner profile: how policies learn and are scored (learner_node/profiles.py)"
+                             + ("; default: the preset's" if default is None else ""))
 
 
 def _count(minimum: int):
@@ -250,7 +259,8 @@ def cmd_bench_learner(args: argparse.Namespace) -> int:
     from glocal_app.benches.learner import learner_bench_report, run_learner_bench
 
     env_counts = [int(n) for n in args.envs.split(",")]
-    rows = run_learner_bench(env_counts, args.steps, args.rounds, learner_node=not args.no_learner_node)
+    rows = run_learner_bench(env_counts, args.steps, args.rounds, learner_node=not args.no_learner_node,
+                             profile=args.profile)
     report = learner_bench_report(rows, "glocal-ros " + " ".join(sys.argv[1:]), args.steps, args.rounds)
     return write_bench_report(report, args.out)
 
@@ -285,10 +295,10 @@ def cmd_bench_transfer(args: argparse.Namespace) -> int:
     if args.tabulate:
         try:
             goals = [goal for source in args.tabulate for goal in read_transfer_goals(source, settings)]
-            keys = [(goal.recipe, goal.prior, goal.task, goal.seed) for goal in goals]
+            keys = [(*goal.arm, goal.task, goal.seed) for goal in goals]
             if len(set(keys)) != len(keys):
                 repeated = next(key for key in keys if keys.count(key) > 1)
-                raise ValueError("the goal (recipe, prior, task, seed) = {} is in the reports more than once"
+                raise ValueError("the goal (profile, recipe, prior, task, seed) = {} is in the reports more than once"
                                  .format(", ".join(map(str, repeated))))
         except (OSError, ValueError) as error:
             print(f"bench transfer --tabulate: {error}", file=sys.stderr)
@@ -297,7 +307,7 @@ def cmd_bench_transfer(args: argparse.Namespace) -> int:
                                   args.out)
     seeds = [int(seed) for seed in args.seeds.split(",")]
     recipes, tasks, priors = args.recipes.split(","), args.tasks.split(","), args.priors.split(",")
-    arms = dict(priors=priors, prior_store=args.prior_store)
+    arms = dict(priors=priors, prior_store=args.prior_store, profiles=args.profiles.split(","))
     goals = (run_transfer_graph(recipes, tasks, seeds, settings, **arms) if args.graph
              else run_transfer_bench(recipes, tasks, seeds, settings, args.jobs, **arms))
     report = transfer_bench_report(goals, command, settings, args.jobs, args.graph)
@@ -310,11 +320,12 @@ def cmd_bench_curriculum(args: argparse.Namespace) -> int:
     command = "glocal-ros " + " ".join(sys.argv[1:])
     code = 0
     if not args.tabulate:
-        check_bench(args.strategies, args.seeds, args.preset, args.out, args.budget)
+        check_bench(args.strategies, args.seeds, args.preset, args.out, args.budget, args.profile)
         bench_inputs(args.out, args.merge)  # a --merge that holds no run is refused before the first run
         from glocal_app.launch import experiment
 
-        code = experiment(args.strategies, args.seeds, args.preset, args.out, step_budget=args.budget, report=False)
+        code = experiment(args.strategies, args.seeds, args.preset, args.out, step_budget=args.budget, report=False,
+                          learner_profile=args.profile)
         if code == 130:  # interrupted: the same command resumes
             return code
     report = tabulate_curriculum_bench(bench_inputs(args.out, args.merge), command, args.results)
@@ -336,7 +347,10 @@ def cmd_train_prior(args: argparse.Namespace) -> int:
     from sim_node.scripted_grasp import ScriptedGraspPolicy
 
     check_name(args.name)
-    config = PriorConfig(max_steps=args.steps, min_steps=args.min_steps, seed=args.seed, network=args.network)
+    config = PriorConfig(max_steps=args.steps, min_steps=args.min_steps, seed=args.seed, network=args.network,
+                         profile=args.profile)
+    profile = learner_profile(config.profile)
+    work_dir = args.work_dir or Path("build") / f"prior-{config.profile}"
     bar = tqdm(total=config.max_steps, unit="step", desc="A0 prior")
 
     def progress(steps: int, success_rate: float) -> None:
@@ -345,7 +359,7 @@ def cmd_train_prior(args: argparse.Namespace) -> int:
             bar.set_postfix(success=f"{success_rate:.0%}")
             bar.refresh()
 
-    model = train_prior(lambda: GraspEnv(config.task), ScriptedGraspPolicy().act, args.work_dir, config, progress)
+    model = train_prior(lambda: GraspEnv(config.task), ScriptedGraspPolicy().act, work_dir, config, progress)
     bar.close()
     batch = BatchedEnvs(lambda i: GraspEnv(config.task), 2, config.task)
     try:
@@ -356,8 +370,9 @@ def cmd_train_prior(args: argparse.Namespace) -> int:
     print(f"{args.name}: {score.successes}/{score.episodes} on {config.task} after {model.num_timesteps} steps")
     record = PolicyRecord(name=args.name, task=config.task, steps_trained=model.num_timesteps,
                           last_score=float(score.successes), last_score_task=config.task,
+                          profile=config.profile,
                           extra={"eval_episodes": score.episodes, "demo_episodes": config.demo_episodes,
-                                 "seed": config.seed, "network": config.network})
+                                 "seed": config.seed, "network": config.network or profile.network})
     PolicyStore(args.out).save(model, record, recent_experience(model.replay_buffer, EXPERIENCE_TRANSITIONS))
     print(f"stored in {args.out}/{args.name}")
     return 0 if passes_threshold(score.successes, args.threshold) else 1
@@ -481,6 +496,7 @@ def build_parser() -> argparse.ArgumentParser:
     bench_learner.add_argument("--no-learner-node", action="store_true",
                                help="leave out the learner_node process (its Train action) column")
     bench_learner.add_argument("--out", type=Path, default=Path("bench/results/learner.md"))
+    add_profile_argument(bench_learner)
     bench_learner.set_defaults(func=cmd_bench_learner)
     bench_backends = bench_commands.add_parser("backends", help="SAC env steps/s of stable-baselines3 (torch) and "
                                                "SBX (JAX), side by side: how the learner's backend was chosen")
@@ -491,12 +507,15 @@ def build_parser() -> argparse.ArgumentParser:
     transfer_defaults = TransferSettings()
     bench_transfer = bench_commands.add_parser(
         "transfer", help="fine-tuning the A0 prior on other objects: steps to B and collapses, recipe by recipe")
-    bench_transfer.add_argument("--recipes", default=",".join(FINE_TUNING_RECIPES),
-                                help=f"comma-separated fine-tuning recipes, of {', '.join(FINE_TUNING_RECIPES)}")
+    bench_transfer.add_argument("--profiles", default=DEFAULT_PROFILE,
+                                help=f"comma-separated learner profiles, of {', '.join(PROFILES)}")
+    bench_transfer.add_argument("--recipes", default=PROFILE_RECIPE,
+                                help=f"comma-separated fine-tuning recipes: {PROFILE_RECIPE} (each profile's own), "
+                                     f"or where the profile allows one, {', '.join(FINE_TUNING_RECIPES)}")
     bench_transfer.add_argument("--priors", default=INITIAL_POLICY,
                                 help="comma-separated stored policies the goals start from (each recipe from each)")
     bench_transfer.add_argument("--prior-store", type=Path, default=None,
-                                help="a policy store searched for the priors before assets/priors "
+                                help="a policy store searched for the priors before the profile's shipped one "
                                      "(train-prior --out)")
     bench_transfer.add_argument("--tasks", default=",".join(TRANSFER_TASKS), help="comma-separated tasks")
     bench_transfer.add_argument("--seeds", default="0,1,2", help="comma-separated goal seeds")
@@ -529,6 +548,7 @@ def build_parser() -> argparse.ArgumentParser:
                                   help="run nothing: tabulate the runs of --out and --merge")
     bench_curriculum.add_argument("--results", type=Path, default=DEFAULT_RESULTS,
                                   help="the table; the report's figures go to a folder of its name beside it")
+    add_profile_argument(bench_curriculum, default=None)
     bench_curriculum.set_defaults(func=cmd_bench_curriculum)
 
     prior = commands.add_parser("train-prior", help="train the A0 prior (resumable) and store it in assets/priors")
@@ -538,11 +558,15 @@ def build_parser() -> argparse.ArgumentParser:
     prior.add_argument("--seed", type=int, default=0)
     prior.add_argument("--eval-episodes", type=int, default=100)
     prior.add_argument("--threshold", type=float, default=75, help="B: the prior must score above it")
-    prior.add_argument("--work-dir", type=Path, default=Path("build/prior"), help="checkpoints, for resuming")
-    prior.add_argument("--out", type=Path, default=None, help="policy store (default: assets/priors)")
+    prior.add_argument("--work-dir", type=Path, default=None,
+                       help="checkpoints, for resuming (default: build/prior-PROFILE)")
+    prior.add_argument("--out", type=Path, default=None,
+                       help="policy store (default: the profile's shipped priors, assets/priors for glocal_ros)")
     prior.add_argument("--name", default="prior", help="the policy's name in the store")
-    prior.add_argument("--network", default=DEFAULT_NETWORK, choices=list(NETWORKS),
-                       help="hidden layers and batch of the new model (learner_node/sac_settings.py)")
+    add_profile_argument(prior)
+    prior.add_argument("--network", default="", choices=list(NETWORKS),
+                       help="hidden layers and batch of the new model (learner_node/sac_settings.py), where the "
+                            "profile allows a choice (default: the profile's)")
     prior.set_defaults(func=cmd_train_prior)
 
     experience = commands.add_parser(
@@ -584,7 +608,7 @@ def main(argv: list[str] | None = None) -> int:
     if args.command == "assets" and args.out is None:
         args.out = objects_dir()
     if args.command == "train-prior" and args.out is None:
-        args.out = assets_dir() / "priors"
+        args.out = learner_profile(args.profile).shipped_priors()
     if args.command == "assets" and args.assets_command == "check" and args.check_episodes < 1:
         parser.error("assets check: --check-episodes must be at least 1")
     if args.command == "train-prior" and not 0 <= args.min_steps <= args.steps:

@@ -197,19 +197,22 @@ def check_graph(node, watchdog: Watchdog, progress: Progress, started: Sequence[
 
 def launch(strategy: str, preset: str, seed: int, run_dir: Path, startup_timeout: float = 120.0,
            report: bool = True, watchdog_sec: float = DEFAULT_WATCHDOG_SEC, namespace: str = "",
-           use_sim_time: bool = False, step_budget: int | None = None) -> int:
+           use_sim_time: bool = False, step_budget: int | None = None, learner_profile: str | None = None) -> int:
     """Run (or resume) one run in ``run_dir``; the curriculum's exit code, 130 on Ctrl-C, ``EXIT_STALLED``.
 
-    ``step_budget`` replaces the preset's training-step budget. Bad input (an unknown preset, a
+    ``step_budget`` replaces the preset's training-step budget, ``learner_profile`` its learner
+    profile. Bad input (an unknown preset or profile, a
     budget below one evaluation interval, an invalid namespace or ROS_DOMAIN_ID, another run's
     directory) raises ``ValueError`` before anything starts.
     """
     params_file = preset_file(preset)
+    check_episode_steps(preset)
     check_step_budget(preset, step_budget)
+    check_learner_profile(learner_profile)
     namespace = normalize_namespace(namespace)
     domain = choose_domain_id()
     try:
-        resumed = claim_run_dir(run_dir, run_settings(strategy, preset, seed, step_budget))
+        resumed = claim_run_dir(run_dir, run_settings(strategy, preset, seed, step_budget, learner_profile))
     except ValueError:
         domain.close()
         raise
@@ -245,7 +248,7 @@ def launch(strategy: str, preset: str, seed: int, run_dir: Path, startup_timeout
     # Raw: the watchdog only needs to know that an episode came, not what it holds.
     node.create_subscription(EpisodeRecord, names.EPISODES, heard("an episode"), qos.EPISODES, raw=True)
     started: list[NodeProcess] = []
-    plan = run_parameters(strategy, seed, run_dir, bag, use_sim_time, step_budget)
+    plan = run_parameters(strategy, seed, run_dir, bag, use_sim_time, step_budget, learner_profile)
 
     def start(name: str) -> NodeProcess:
         process = NodeProcess(name, logs, plan[name], params_file, env, extra_args=namespace_arguments(namespace))
@@ -314,6 +317,19 @@ def write_run_report(run_dirs: Sequence[Path], out_dir: Path) -> None:
     print(f"report: {path}")
 
 
+def check_episode_steps(preset: str, params_dir: Path | None = None) -> None:
+    """``ValueError`` unless the preset gives the sim's T (``max_steps``) and the curriculum's
+    (``max_episode_steps``, which sizes the baselines' goals) the same value."""
+    from glocal_ros.sim_contract import DEFAULT_EPISODE_STEPS
+
+    sim = preset_parameters(preset, "sim_node", params_dir).get("max_steps", DEFAULT_EPISODE_STEPS)
+    curriculum = preset_parameters(preset, "curriculum_node", params_dir).get("max_episode_steps",
+                                                                              DEFAULT_EPISODE_STEPS)
+    if sim != curriculum:
+        raise ValueError(f"preset {preset}: sim_node max_steps {sim} and curriculum_node max_episode_steps "
+                         f"{curriculum} must be the same T")
+
+
 def check_step_budget(preset: str, step_budget: int | None) -> None:
     """``ValueError`` when ``step_budget`` (None: the preset's own) ends before any strategy evaluates a trained task.
 
@@ -331,13 +347,21 @@ def check_step_budget(preset: str, step_budget: int | None) -> None:
                          f"({shown}): a strategy would never evaluate what it trained")
 
 
+def check_learner_profile(name: str | None) -> None:
+    """``ValueError`` naming the profiles unless ``name`` is one (None: the preset's)."""
+    if name is not None:
+        from learner_node.profiles import learner_profile
+
+        learner_profile(name)
+
+
 def experiment_runs(strategies: Sequence[str], seeds: Sequence[int], out: Path) -> list[tuple[str, int, Path]]:
     """``(strategy, seed, OUT/<strategy>-seed<N>)`` of every run of an experiment, in the order they run."""
     return [(strategy, seed, out / f"{strategy}-seed{seed}") for strategy in strategies for seed in seeds]
 
 
 def check_experiment(strategies: Sequence[str], seeds: Sequence[int], preset: str, out: Path,
-                     step_budget: int | None = None, namespace: str = "") -> None:
+                     step_budget: int | None = None, namespace: str = "", learner_profile: str | None = None) -> None:
     """Everything ``experiment`` refuses, checked before its first node starts; ``ValueError`` says what.
 
     Strategies must be known and not repeat, seeds non-negative and not repeat, the preset must
@@ -352,20 +376,23 @@ def check_experiment(strategies: Sequence[str], seeds: Sequence[int], preset: st
     if min(seeds) < 0:
         raise ValueError(f"seeds must be non-negative integers, got {list(seeds)}")
     preset_file(preset)
+    check_episode_steps(preset)
     check_step_budget(preset, step_budget)
+    check_learner_profile(learner_profile)
     normalize_namespace(namespace)
     for strategy, seed, run_dir in experiment_runs(strategies, seeds, out):
-        check_run_dir(run_dir, run_settings(strategy, preset, seed, step_budget))
+        check_run_dir(run_dir, run_settings(strategy, preset, seed, step_budget, learner_profile))
 
 
 def experiment(strategies: Sequence[str], seeds: Sequence[int], preset: str, out: Path, namespace: str = "",
-               use_sim_time: bool = False, step_budget: int | None = None, report: bool = True) -> int:
+               use_sim_time: bool = False, step_budget: int | None = None, report: bool = True,
+               learner_profile: str | None = None) -> int:
     """Every strategy x seed as its own run under ``out``; finished runs are kept, others (re)launched.
 
     The runs go one after another, each with ``launch``'s namespace, sim time and domain choice,
     after ``check_experiment`` passed; then one report over all of them (unless ``report`` is off).
     """
-    check_experiment(strategies, seeds, preset, out, step_budget, namespace)
+    check_experiment(strategies, seeds, preset, out, step_budget, namespace, learner_profile)
     run_dirs, failed = [], []
     for strategy, seed, run_dir in experiment_runs(strategies, seeds, out):
         run_dirs.append(run_dir)
@@ -373,7 +400,7 @@ def experiment(strategies: Sequence[str], seeds: Sequence[int], preset: str, out
             print(f"{run_dir.name}: finished before")
             continue
         code = launch(strategy, preset, seed, run_dir, report=False, namespace=namespace,
-                      use_sim_time=use_sim_time, step_budget=step_budget)
+                      use_sim_time=use_sim_time, step_budget=step_budget, learner_profile=learner_profile)
         if code == 130:
             return code
         if code:

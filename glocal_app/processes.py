@@ -104,11 +104,15 @@ def new_bag_path(run_dir: Path) -> Path:
     return bag
 
 
-def run_settings(strategy: str, preset: str, seed: int, step_budget: int | None = None) -> dict[str, object]:
-    """What ``RUN_FILE`` records of a run: its strategy, preset and seed, and a budget that overrides the preset's."""
+def run_settings(strategy: str, preset: str, seed: int, step_budget: int | None = None,
+                 learner_profile: str | None = None) -> dict[str, object]:
+    """What ``RUN_FILE`` records of a run: its strategy, preset and seed, and a budget and a learner profile that
+    override the preset's."""
     settings: dict[str, object] = {"strategy": strategy, "preset": preset, "seed": seed}
     if step_budget is not None:
         settings["step_budget"] = step_budget
+    if learner_profile is not None:
+        settings["learner_profile"] = learner_profile
     return settings
 
 
@@ -149,19 +153,20 @@ def preset_parameters(preset: str, node: str, params_dir: Path | None = None) ->
 
 
 def run_parameters(strategy: str, seed: int, run_dir: Path, bag: Path, use_sim_time: bool = False,
-                   step_budget: int | None = None) -> dict[str, dict[str, object]]:
+                   step_budget: int | None = None, learner_profile: str | None = None) -> dict[str, dict[str, object]]:
     """What each node of a run gets on top of its preset, keyed by node, in ``RUN_NODES`` order.
 
     ``use_sim_time`` is given to the nodes of ``SIM_TIME_NODES`` only, and only when on: a node
     without it keeps whatever its preset says. ``step_budget`` (training steps of the whole run)
-    replaces the preset's when given.
+    and ``learner_profile`` replace the preset's when given.
     """
     budget = {"step_budget": step_budget} if step_budget is not None else {}
     sim_time = {"use_sim_time": True} if use_sim_time else {}
+    profile = {"learner_profile": learner_profile} if learner_profile is not None else {}
     return {
         "recorder_node": {"output": str(bag), **sim_time},
         "sim_node": {"seed": seed, **sim_time},
-        "learner_node": {"seed": seed, "policy_dir": str(run_dir / "policies")},
+        "learner_node": {"seed": seed, "policy_dir": str(run_dir / "policies"), **profile},
         "curriculum_node": {"strategy": strategy, "seed": seed, "state_dir": str(run_dir / "curriculum"),
                             **budget},
     }

@@ -25,6 +25,9 @@ PHASE_EVAL = 1
 PHASES = (PHASE_TRAIN, PHASE_EVAL)
 #: EpisodeRecord.seed of an episode no reset seeded (it continues its env's random stream).
 UNSEEDED = -1
+#: T: an episode's steps before it is truncated, unless the sim is told otherwise (sim_node ``max_steps``;
+#: curriculum_node's ``max_episode_steps`` must say the same).
+DEFAULT_EPISODE_STEPS = 50
 
 
 @dataclass

@@ -9,7 +9,8 @@ share/glocal_ros/assets/params: smoke, demo, paper; default demo), ``seed``
 (default 0), ``out`` (the run directory; default
 ``$ROS_HOME/glocal_ros/runs/<strategy>-seed<seed>``), ``namespace`` (default
 none; relative, so an including launch file's PushRosNamespace prefixes it)
-and ``use_sim_time`` (default false).
+``use_sim_time`` (default false) and ``learner_profile`` (default: the
+preset's; glocal_ros or paper, ``learner_node/profiles.py``).
 
 It starts recorder_node, sim_node, learner_node and curriculum_node with the
 parameters ``glocal-ros launch`` gives them, from the one plan of both
@@ -54,6 +55,8 @@ from glocal_app.processes import (RUN_NODES, claim_run_dir, default_run_dir, nam
 PACKAGE = "glocal_ros"
 #: As glocal_ros.curriculum.codes.STRATEGY_NAMES (not imported: see the docstring; a test compares them).
 STRATEGIES = ("glocal", "random", "alp_gmm_250", "alp_gmm_10", "glocal_no_global", "glocal_random_cluster")
+#: As learner_node.profiles.PROFILES (not imported: see the docstring; a test compares them).
+LEARNER_PROFILES = ("glocal_ros", "paper")
 BOOLEANS = ("true", "false")
 
 
@@ -77,8 +80,12 @@ def run_nodes(context, *args, **kwargs) -> list:
     run_dir = Path(arguments["out"]).expanduser().resolve() if arguments["out"].strip() else \
         default_run_dir(strategy, seed)
     params_file = preset_file(preset, params_dir())
-    claim_run_dir(run_dir, run_settings(strategy, preset, seed))
-    plan = run_parameters(strategy, seed, run_dir, new_bag_path(run_dir), use_sim_time)
+    learner_profile = arguments["learner_profile"].strip() or None
+    if learner_profile is not None and learner_profile not in LEARNER_PROFILES:
+        raise ValueError(f"learner_profile:={learner_profile!r}: expected one of {', '.join(LEARNER_PROFILES)}")
+    claim_run_dir(run_dir, run_settings(strategy, preset, seed, learner_profile=learner_profile))
+    plan = run_parameters(strategy, seed, run_dir, new_bag_path(run_dir), use_sim_time,
+                          learner_profile=learner_profile)
     nodes = {
         name: Node(
             package=PACKAGE, executable=name, output="screen",
@@ -112,5 +119,7 @@ def generate_launch_description() -> LaunchDescription:
                               "(several graphs on one domain); topics are then /robot1/..."),
         DeclareLaunchArgument("use_sim_time", default_value="false", choices=list(BOOLEANS),
                               description="sim_node and recorder_node on the sim's clock (<namespace>/clock)"),
+        DeclareLaunchArgument("learner_profile", default_value="", description="the learner profile, "
+                              f"one of {', '.join(LEARNER_PROFILES)}; empty: the preset's"),
         OpaqueFunction(function=run_nodes),
     ])

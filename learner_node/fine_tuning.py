@@ -23,6 +23,7 @@ model new states.
 
 from __future__ import annotations
 
+import copy
 from dataclasses import dataclass
 from typing import Callable, Sequence
 
@@ -48,16 +49,36 @@ class InputLayer:
 
 def start_fine_tuning(model, tuning: FineTuning, tasks: Sequence[str]) -> None:
     """Give the freshly loaded SAC ``model`` the start ``tuning`` names for a goal on ``tasks``."""
-    bits = [task_index(task) for task in tasks]
     for name in ("actor_state", "qf_state"):
-        state = getattr(model.policy, name)
-        if tuning.new_task_inputs == "trained-mean":
-            state = _edited(state, lambda params, mu, nu: inherit_task_inputs(params, mu, nu, bits))
-        if tuning.optimizers == "fresh":
-            state = state.replace(opt_state=state.tx.init(state.params))  # moments at zero, step 0
+        state = _with_task_inputs(getattr(model.policy, name), tuning, tasks)
+        if tuning.optimizers in ("fresh", "fresh-all"):
+            state = _fresh(state)
         elif tuning.optimizers == "unseen-as-bias":
             state = _edited(state, unseen_inputs_as_bias)
         setattr(model.policy, name, state)
+    if tuning.optimizers == "fresh-all" and hasattr(model, "ent_coef_state"):  # a learned coefficient has one
+        model.ent_coef_state = _fresh(model.ent_coef_state)
+
+
+def goal_start_actor(model, tuning: FineTuning, tasks: Sequence[str]):
+    """A copy of ``model``'s policy whose actor is the one a goal on any of ``tasks`` starts with (its task
+    inputs as ``tuning`` sets them); ``model`` is unchanged. Editing the bits of all ``tasks`` at once is
+    editing each on its own: a one-hot bit's first-layer weights act only on its task's observations."""
+    policy = copy.copy(model.policy)
+    policy.actor_state = _with_task_inputs(model.policy.actor_state, tuning, tasks)
+    return policy
+
+
+def _with_task_inputs(state, tuning: FineTuning, tasks: Sequence[str]):
+    if tuning.new_task_inputs != "trained-mean":
+        return state
+    bits = [task_index(task) for task in tasks]
+    return _edited(state, lambda params, mu, nu: inherit_task_inputs(params, mu, nu, bits))
+
+
+def _fresh(state):
+    """``state`` with its optimiser at its start: moments at zero, step 0."""
+    return state.replace(opt_state=state.tx.init(state.params))
 
 
 def input_layers(model) -> list[InputLayer]:

@@ -18,11 +18,15 @@ action protocol gives a rejection no message, and the client must tell
 "busy, offer it again" from "never send this".
 
 Policies: ``random``, the learner's policy store (``policy_dir``) and the
-shipped A0 ``prior``; ``learner/copy_policy`` copies one into the store.
+shipped A0 ``prior`` of the learner's profile (``learner_profile``:
+``learner_node.profiles``); ``learner/copy_policy`` copies one into the
+store. A Train goal refuses a policy of another profile. ``learner/evaluate``
+scores a policy as a Train goal from it starts it, so the two agree.
 """
 
 from __future__ import annotations
 
+import math
 import threading
 import time
 from collections import deque
@@ -38,15 +42,16 @@ from rclpy.action import ActionServer, CancelResponse, GoalResponse
 from rclpy.callback_groups import MutuallyExclusiveCallbackGroup, ReentrantCallbackGroup
 from rclpy.node import Node
 
-from glocal_ros.paths import assets_dir, ros_home
+from glocal_ros.curriculum.learner import PAPER_EVAL_EPISODES, paper_threshold
+from glocal_ros.paths import ros_home
 from glocal_ros.tasks import validate_tasks
 from learner_node.evaluation import evaluate
 from learner_node.policies import PolicyExists, PolicyRegistry
 from learner_node.policy_store import PolicyStore
-from learner_node.sac_settings import DEFAULT_RECIPE, FINE_TUNING_RECIPES, fine_tuning_recipe
+from learner_node.profiles import DEFAULT_PROFILE, PROFILES, learner_profile
+from learner_node.sac_settings import FINE_TUNING_RECIPES
 from learner_node.sim_client import SimClient
-from learner_node.training import (DEFAULT_EVAL_EPISODES, DEFAULT_MAX_STEP_BUDGET, DEFAULT_THRESHOLD_FRACTION,
-                                   GoalFailed, Trainer, TrainProgress, TrainSpec)
+from learner_node.training import DEFAULT_MAX_STEP_BUDGET, GoalFailed, Trainer, TrainProgress, TrainSpec
 from node_common import names, qos
 from node_common.params import declare
 from node_common.runner import spin_node
@@ -87,17 +92,24 @@ class LearnerNode(Node):
         checkpoint_interval = declare(self, "checkpoint_interval", 5_000,
                                       "training env steps between checkpoints of a Train goal",
                                       min_value=1, max_value=10_000_000)
-        recipe = declare(self, "fine_tuning", DEFAULT_RECIPE, "how a Train goal trains the stored model it starts "
-                         f"from: one of {', '.join(FINE_TUNING_RECIPES)} (learner_node/sac_settings.py)")
+        profile_name = declare(self, "learner_profile", DEFAULT_PROFILE, "how policies learn and are scored: "
+                               f"one of {', '.join(PROFILES)} (learner_node/profiles.py)")
+        recipe = declare(self, "fine_tuning", "", "another way for a Train goal to start from a stored policy, "
+                         "where the profile allows one (glocal_ros: any of "
+                         f"{', '.join(FINE_TUNING_RECIPES)}); empty: the profile's own")
         try:
-            fine_tuning = fine_tuning_recipe(recipe)
+            profile = learner_profile(profile_name)
+        except ValueError as error:
+            raise ValueError(f"parameter learner_profile: {error}") from None
+        try:
+            fine_tuning = profile.with_recipe(recipe)
         except ValueError as error:
             raise ValueError(f"parameter fine_tuning: {error}") from None
 
-        self.policies = PolicyRegistry(PolicyStore(Path(policy_dir)), [PolicyStore(assets_dir() / "priors")], seed)
+        self.policies = PolicyRegistry(PolicyStore(Path(policy_dir)), [PolicyStore(profile.shipped_priors())], seed)
         self.sim = SimClient(self, timeout_sec=self.sim_timeout)
         self.trainer = Trainer(self.sim, self.policies, Path(policy_dir) / ".checkpoints", seed, checkpoint_interval,
-                               fine_tuning=fine_tuning)
+                               profile=profile, fine_tuning=fine_tuning)
         # Whoever holds sim_lock runs the queued jobs: a training goal between
         # its steps, otherwise the requester itself.
         self.sim_lock = threading.Lock()
@@ -120,7 +132,7 @@ class LearnerNode(Node):
 
     @answers_errors("evaluate")
     def on_evaluate(self, request: Evaluate.Request, response: Evaluate.Response) -> Evaluate.Response:
-        episodes = request.episodes or DEFAULT_EVAL_EPISODES
+        episodes = request.episodes or PAPER_EVAL_EPISODES
         if not request.tasks:
             raise ValueError("no task to evaluate")
         tasks = validate_tasks(request.tasks)
@@ -129,7 +141,7 @@ class LearnerNode(Node):
         if episodes > self.max_eval_episodes:
             raise ValueError(f"episodes {episodes} above max_eval_episodes {self.max_eval_episodes}")
         seed = None if request.seed < 0 else request.seed
-        policy = self.policies.load(request.policy, seed)
+        policy = self.trainer.evaluation_policy(request.policy, tasks, seed)
         scores = self.run_on_sim(lambda: evaluate(
             self.sim, policy, tasks, episodes, policy_name=request.policy, seed=seed,
             global_step=self.trainer.total_steps,
@@ -190,18 +202,20 @@ class LearnerNode(Node):
         goal: Train.Goal = goal_handle.request
         result = Train.Result()
         try:
-            eval_episodes = goal.eval_episodes or DEFAULT_EVAL_EPISODES
+            eval_episodes = goal.eval_episodes or PAPER_EVAL_EPISODES
+            if math.isnan(goal.threshold):
+                raise ValueError("threshold is NaN: give B as a number of successes (negative: 0.75 x eval_episodes)")
             spec = TrainSpec(
                 task=goal.task, episode_tasks=tuple(goal.episode_tasks), episode_limit=goal.episode_limit,
                 initial_policy=goal.initial_policy,
                 output_policy=goal.output_policy, step_budget=goal.step_budget,
-                threshold=goal.threshold if goal.threshold >= 0 else DEFAULT_THRESHOLD_FRACTION * eval_episodes,
+                threshold=goal.threshold if goal.threshold >= 0 else paper_threshold(eval_episodes),
                 eval_episodes=eval_episodes,
                 eval_interval=goal.eval_interval, stop_when_learned=goal.stop_when_learned,
                 keep_replay_buffer=goal.keep_replay_buffer, seed=None if goal.seed < 0 else goal.seed,
             )
             spec.check(self.max_eval_episodes, self.max_step_budget)
-            self.policies.record(spec.initial_policy)  # an unknown policy fails here, not mid-goal
+            self.trainer.check_initial_policy(spec.initial_policy)  # unknown, or of another profile: here
             self.policies.check_writable(spec.output_policy)
         except (ValueError, KeyError) as error:
             result.message = str(error)

@@ -54,6 +54,9 @@ class PolicyRecord:
     model_file: str = ""
     extra: dict[str, Any] = field(default_factory=dict)
     experience_file: str = ""  # "": the policy keeps no experience
+    # The learner profile it was trained under (``learner_node.profiles``); records from before profiles
+    # existed were all trained as ``glocal_ros``.
+    profile: str = "glocal_ros"
 
 
 def check_name(name: str) -> str:

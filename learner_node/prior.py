@@ -6,6 +6,16 @@ from a prior trained on A0. So the replay buffer is seeded with episodes of
 the scripted grasp controller (privileged state, same action space), and SAC
 then trains on the plain sparse reward: no shaping, no relabelling.
 
+The prior is a new model of a learner profile (``learner_node.profiles``:
+network, gamma, buffer, initialisation), trained the same way for every
+profile: demonstrations, then SAC with time-limit ends bootstrapped. The
+``paper`` profile stores time-limit ends as terminal in its goals, as SB2
+did; training its prior so, A0 was never grasped in 107k steps (0 of the last
+50 training episodes; bootstrapped, 26% by 47.5k steps: ``bench/results/
+prior-paper.md``): the time left is not in the observation, so a terminal
+time limit makes the same state worth -1 or -39 by chance. The paper does not
+say how its prior was trained; this is how this project makes one.
+
 Training checkpoints (model and replay buffer) to a work directory, so an
 interrupted ``glocal-ros train-prior`` resumes where it stopped. The env and
 the demonstrator are passed in: this module does not import the simulator.
@@ -21,8 +31,9 @@ from typing import Callable
 import gymnasium as gym
 import numpy as np
 
+from learner_node.profiles import DEFAULT_PROFILE, learner_profile
 from learner_node.replay_buffer import Experience, recent_experience
-from learner_node.sac_settings import DEFAULT_NETWORK, load_model, network, seed_keys
+from learner_node.sac_settings import load_model, seed_keys
 
 Demonstrator = Callable[[gym.Env], np.ndarray]
 
@@ -39,10 +50,11 @@ class PriorConfig:
     # steps); trained on to 100k (100/100), all 24 passed at 500 (bench/results/transfer-sbx.md).
     min_steps: int = 100_000
     seed: int = 0
-    network: str = DEFAULT_NETWORK  # of learner_node.sac_settings.NETWORKS
+    profile: str = DEFAULT_PROFILE  # of learner_node.profiles.PROFILES: the new model's settings
+    network: str = ""  # of learner_node.sac_settings.NETWORKS, where the profile allows a choice; "": its own
 
     def __post_init__(self) -> None:
-        network(self.network)  # ValueError naming the known networks
+        learner_profile(self.profile).network_of(self.network)  # ValueError naming the allowed ones
 
 
 def seed_replay_buffer(model, env: gym.Env, demonstrator: Demonstrator, episodes: int, seed: int) -> int:
@@ -87,18 +99,20 @@ def train_prior(make_env: Callable[[], gym.Env], demonstrator: Demonstrator, wor
     """Train (or resume training) the prior; returns the SAC model."""
     from stable_baselines3.common.callbacks import BaseCallback
 
+    profile = learner_profile(config.profile)
     work_dir.mkdir(parents=True, exist_ok=True)
     checkpoint, buffer_file = work_dir / "checkpoint.zip", work_dir / "replay_buffer.pkl"
     env = make_env()
     if checkpoint.is_file() and buffer_file.is_file():
         model = load_model(checkpoint, env=env)
-        chosen = network(config.network)
-        if (model.batch_size, model.policy_kwargs.get("net_arch")) != (chosen.batch_size, list(chosen.hidden)):
-            raise ValueError(f"{checkpoint} continues a model of another network than {config.network!r}: "
-                             "choose another work directory")
+        wanted = profile.model_kwargs(config.network)
+        if (model.batch_size, model.policy_kwargs.get("net_arch"), model.gamma, model.buffer_size) != \
+                (wanted["batch_size"], wanted["policy_kwargs"]["net_arch"], wanted["gamma"], wanted["buffer_size"]):
+            raise ValueError(f"{checkpoint} continues a model of another network or learner profile than "
+                             f"this prior's ({profile.name!r}): choose another work directory")
         model.load_replay_buffer(buffer_file)
     else:
-        model = network(config.network).new_model(env, config.seed)
+        model = profile.new_model(env, config.seed, config.network)
         seed_replay_buffer(model, make_env(), demonstrator, config.demo_episodes, config.seed + 10_000)
         # Demonstrations fill the buffer, so updates (and policy actions) start at once.
         model.learning_starts = 0

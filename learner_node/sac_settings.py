@@ -147,8 +147,8 @@ EXPERIENCE_TRANSITIONS = 10_000
 
 #: What a goal's model acts with until its first batch of transitions is in the replay buffer.
 FirstActions = Literal["random", "policy"]
-#: The Adam moments a goal's actor and critics start with (``FineTuning.optimizers``).
-Optimizers = Literal["stored", "fresh", "unseen-as-bias"]
+#: The Adam moments a goal's actor and critics (and entropy coefficient) start with (``FineTuning.optimizers``).
+Optimizers = Literal["stored", "fresh", "fresh-all", "unseen-as-bias"]
 #: Where the first-layer weights of a task bit the stored model never trained on start (``FineTuning``).
 NewTaskInputs = Literal["initial", "trained-mean"]
 
@@ -158,10 +158,21 @@ class FineTuning:
     """How a Train goal trains the stored model it starts from.
 
     ``first_actions``: ``"random"`` is SB3's warm-up (uniform random actions
-    while ``num_timesteps < learning_starts``), so a goal's first batch of
-    env steps ignores the loaded policy; ``"policy"`` acts with
+    while ``num_timesteps < learning_starts``), so a goal's first
+    ``random_steps`` env steps ignore the loaded policy; ``"policy"`` acts with
     the loaded (stochastic) policy from the first step. Either way gradient
     steps start once a batch of transitions is in the buffer.
+
+    ``random_steps``: with ``"random"``, None is one batch, SB3's way (its
+    first gradient steps come with the env step after the batch); a count n
+    is Stable Baselines 2's ``learning_starts``: n uniform random actions,
+    and the first gradient steps right after the n-th transition.
+
+    ``rearm_warm``: a goal that continues the previous goal's model
+    (``keep_replay_buffer``) starts with ``random_steps`` random actions
+    again, as each ``learn()`` call of Stable Baselines 2 does with its
+    default ``reset_num_timesteps=True``; False: it goes on acting with the
+    policy, SB3's ``reset_num_timesteps=False``.
 
     ``experience``: the goal's buffer starts with the (up to) this many
     transitions its initial policy keeps, and the policy it stores keeps the
@@ -185,7 +196,9 @@ class FineTuning:
     task's). On a new task those weights then move by about 3 to 6 times the
     learning rate per gradient step for hundreds of steps (first step
     m / sqrt(v) = 0.1 / sqrt(0.001)). ``"fresh"``: new moments for every
-    weight, at step 0, as a new model's. ``"unseen-as-bias"``: the stored
+    weight, at step 0, as a new model's. ``"fresh-all"``: the same, and for the
+    entropy coefficient's Adam too (Stable Baselines 2 saves none of the
+    three). ``"unseen-as-bias"``: the stored
     moments, and an input that never had a gradient gets, in each layer, the
     second moments of that layer's bias (a one-hot bit that is on is a bias),
     so its weights start moving at the pace of the rest. Only for a model
@@ -202,6 +215,8 @@ class FineTuning:
     """
 
     first_actions: FirstActions = "random"
+    random_steps: int | None = None  # None: one batch
+    rearm_warm: bool = False
     batch_size: int | None = None  # None: the stored model's own
     learning_rate: float | None = None  # None: the stored model's own
     experience: int = 0
@@ -212,14 +227,20 @@ class FineTuning:
     def __post_init__(self) -> None:
         if self.first_actions not in ("random", "policy"):
             raise ValueError(f"first_actions must be 'random' or 'policy', got {self.first_actions!r}")
+        if self.random_steps is not None and (self.random_steps < 1 or self.first_actions != "random"):
+            raise ValueError(f"random_steps must be at least 1, and only with first_actions 'random', "
+                             f"got {self.random_steps} with {self.first_actions!r}")
+        if self.rearm_warm and self.random_steps is None:
+            raise ValueError("rearm_warm needs random_steps")
         if self.batch_size is not None and self.batch_size < 1:
             raise ValueError(f"batch_size must be at least 1, got {self.batch_size}")
         if self.learning_rate is not None and not self.learning_rate > 0:
             raise ValueError(f"learning_rate must be positive, got {self.learning_rate}")
         if self.experience < 0:
             raise ValueError(f"experience must not be negative, got {self.experience}")
-        if self.optimizers not in ("stored", "fresh", "unseen-as-bias"):
-            raise ValueError(f"optimizers must be 'stored', 'fresh' or 'unseen-as-bias', got {self.optimizers!r}")
+        if self.optimizers not in ("stored", "fresh", "fresh-all", "unseen-as-bias"):
+            raise ValueError("optimizers must be 'stored', 'fresh', 'fresh-all' or 'unseen-as-bias', "
+                             f"got {self.optimizers!r}")
         if self.new_task_inputs not in ("initial", "trained-mean"):
             raise ValueError(f"new_task_inputs must be 'initial' or 'trained-mean', got {self.new_task_inputs!r}")
         if self.critic_warmup < 0:

@@ -53,28 +53,26 @@ import time
 from collections import deque
 from dataclasses import asdict, dataclass, field
 from pathlib import Path
-from typing import Callable
+from typing import Callable, Sequence
 
 import numpy as np
 from stable_baselines3.common.callbacks import BaseCallback
 
-from glocal_ros.curriculum.learner import EpisodeSummary, passes_threshold
+from glocal_ros.curriculum.learner import PAPER_EVAL_EPISODES, EpisodeSummary, paper_threshold, passes_threshold
 from glocal_ros.files import atomic_write
 from glocal_ros.seeds import MAX_SEED, derived_seed
 from glocal_ros.sim_contract import BatchStepper
 from glocal_ros.tasks import validate_tasks
-from learner_node.evaluation import Score, evaluate
-from learner_node.fine_tuning import start_fine_tuning
+from learner_node.evaluation import BatchPolicy, Score, evaluate
+from learner_node.fine_tuning import goal_start_actor, start_fine_tuning
 from learner_node.policies import RANDOM_POLICY, PolicyRegistry
 from learner_node.policy_store import PolicyRecord, check_name
 from learner_node.replay_buffer import add_experience, load_replay_buffer, recent_experience, save_replay_buffer
-from learner_node.sac_settings import DEFAULT_FINE_TUNING, SAC_KWARGS, FineTuning, load_model, seed_keys
+from learner_node.profiles import DEFAULT_PROFILE, PROFILES, LearnerProfile
+from learner_node.sac_settings import SAC_KWARGS, FineTuning, load_model, seed_keys
 from learner_node.updates import OverlappedUpdates
 from learner_node.vec_env import BatchVecEnv, TaskCycle
 
-#: B as a share of the evaluation episodes: the paper's 75 of 100.
-DEFAULT_THRESHOLD_FRACTION = 0.75
-DEFAULT_EVAL_EPISODES = 100
 #: Largest step budget of one goal: the paper's whole run is 4M steps; a budget beyond this is a typo
 #: (or 2^64 - 1), and would train until cancelled.
 DEFAULT_MAX_STEP_BUDGET = 100_000_000
@@ -94,8 +92,8 @@ class TrainSpec:
     step_budget: int
     episode_tasks: tuple[str, ...] = ()
     episode_limit: int = 0  # end the goal once this many training episodes have finished; 0: no limit
-    threshold: float = DEFAULT_THRESHOLD_FRACTION * DEFAULT_EVAL_EPISODES
-    eval_episodes: int = DEFAULT_EVAL_EPISODES
+    threshold: float = paper_threshold()
+    eval_episodes: int = PAPER_EVAL_EPISODES
     eval_interval: int = 0
     stop_when_learned: bool = False
     keep_replay_buffer: bool = False
@@ -170,13 +168,18 @@ class _GoalState:
 
 
 class Trainer:
-    """Runs Train goals on ``envs`` with the policies of ``policies``."""
+    """Runs Train goals on ``envs`` with the policies of ``policies``, as ``profile`` learns.
+
+    ``fine_tuning``: how a goal starts from a stored policy, the profile's own unless given (``bench
+    transfer`` compares recipes: ``LearnerProfile.with_recipe`` says which a profile allows).
+    """
 
     def __init__(self, envs: BatchStepper, policies: PolicyRegistry, checkpoint_root: Path, seed: int = 0,
                  checkpoint_interval: int = 5_000, progress_interval_sec: float = 1.0,
-                 fine_tuning: FineTuning = DEFAULT_FINE_TUNING):
+                 profile: LearnerProfile = PROFILES[DEFAULT_PROFILE], fine_tuning: FineTuning | None = None):
         self.envs = envs
-        self.fine_tuning = fine_tuning
+        self.profile = profile
+        self.fine_tuning = fine_tuning or profile.fine_tuning
         self.policies = policies
         self.checkpoint_root = Path(checkpoint_root)
         self.seed = seed
@@ -184,6 +187,11 @@ class Trainer:
         self.progress_interval_sec = progress_interval_sec
         self.total_steps = 0  # training env steps over all goals, for the episode records
         self._warm: tuple[str, str, object] | None = None  # (policy, model file, model) of the last goal
+
+    @property
+    def learner_key(self) -> dict:
+        """What besides the spec decides a goal: a checkpoint of another profile or recipe is not resumed."""
+        return {"profile": self.profile.name, "fine_tuning": asdict(self.fine_tuning)}
 
     def train(
         self,
@@ -199,16 +207,37 @@ class Trainer:
         the first step, each interval, the end) as soon as it is scored, with the goal's training
         steps it scored the policy after: the record of what the goal's decisions were based on.
         """
+        self.check_initial_policy(spec.initial_policy)
         finished = self._finished_before(spec, self.checkpoint_root / spec.output_policy)
         if finished is not None:
             return finished
         return _Goal(self, spec, on_progress, should_stop, between_steps, on_evaluation).run()
 
+    def check_initial_policy(self, name: str) -> None:
+        """``ValueError`` unless a goal of this trainer may start from ``name``: a policy of its profile."""
+        record = self.policies.record(name)
+        if record.profile != self.profile.name:
+            raise ValueError(f"policy {name!r} was trained under learner profile {record.profile!r}, and this "
+                             f"learner runs profile {self.profile.name!r}: start from a policy of "
+                             f"{self.profile.name!r} (its shipped prior is in assets/{self.profile.prior_store})")
+
+    def evaluation_policy(self, name: str, tasks: Sequence[str], seed: int | None = None) -> BatchPolicy:
+        """``name`` acting as a goal of this trainer on any of ``tasks`` starts it, before its first step.
+
+        So ``learner/evaluate`` and a goal's check before its first step score one network: with
+        ``new_task_inputs="trained-mean"`` the goal edits the task inputs before that check.
+        """
+        if name == RANDOM_POLICY or self.fine_tuning.new_task_inputs == "initial":
+            return self.policies.load(name, seed)
+        policy = goal_start_actor(self.policies.model(name), self.fine_tuning, tasks)
+        return lambda observations: policy.predict(observations, deterministic=True)[0]
+
     def _mark_finished(self, folder: Path, spec: TrainSpec, state: _GoalState, model_file: str) -> None:
         """Replace the checkpoint by the goal's outcome: a client that lost the result may ask again."""
         shutil.rmtree(folder, ignore_errors=True)
         folder.mkdir(parents=True)
-        text = json.dumps({"spec": _spec_key(spec), "state": asdict(state), "model_file": model_file}).encode()
+        text = json.dumps({"spec": _spec_key(spec), "learner": self.learner_key, "state": asdict(state),
+                           "model_file": model_file}).encode()
         atomic_write(folder / FINISHED_FILE, lambda stream: stream.write(text))
 
     def _finished_before(self, spec: TrainSpec, folder: Path) -> TrainOutcome | None:
@@ -219,116 +248,12 @@ class Trainer:
         finished = json.loads(path.read_text())
         if finished["spec"] != _spec_key(spec) or spec.output_policy not in self.policies.store:
             return None
+        if finished.get("learner") != self.learner_key:
+            return None
         if self.policies.store.record(spec.output_policy).model_file != finished["model_file"]:
             return None
         state = _GoalState(**finished["state"])
-        return self._outcome(state, True, f"finished before, not trained again: {state.steps_used} steps")
-
-    def _spaces(self, spec: TrainSpec):
-        """The initial policy's spaces: SB3 refuses an env whose Box bounds differ from the model's."""
-        record = self.policies.record(spec.initial_policy)
-        model = self.policies.model(record.name)
-        return model.observation_space, model.action_space
-
-    def _model(self, spec: TrainSpec, vec_env: BatchVecEnv, checkpoint_dir: Path, state: _GoalState,
-               cycle: TaskCycle):
-        """The model to train and the step it resumes from (0 for a new goal)."""
-        saved = _read_checkpoint(checkpoint_dir)
-        if saved is not None and saved["spec"] == _spec_key(spec):
-            model = load_model(checkpoint_dir / saved["model"], env=vec_env)
-            if not load_replay_buffer(model.replay_buffer, checkpoint_dir / saved["buffer"]):
-                self._start_buffer(model, spec)
-            state.__dict__.update(saved["state"])
-            restore_random_state(model, saved["random_state"])
-            cycle.position = saved["task_position"]
-            return model, state.steps_used
-        store_path = str(self.policies.model_path(spec.initial_policy))
-        if spec.keep_replay_buffer and self._warm and self._warm[:2] == (spec.initial_policy, store_path):
-            model = self._warm[2]
-            model.set_env(vec_env, force_reset=True)
-            return model, 0
-        model = load_model(store_path, env=vec_env)
-        self._start_buffer(model, spec)
-        state.critic_warmup = self.fine_tuning.critic_warmup  # a warm model's critic has seen its data
-        start_fine_tuning(model, self.fine_tuning, spec.episode_tasks or (spec.task,))
-        return model, 0
-
-    def _start_buffer(self, model, spec: TrainSpec) -> None:
-        """Fill the new model's empty buffer with the initial policy's experience (``fine_tuning.experience``),
-        and act as ``fine_tuning.first_actions`` says until a batch of the goal's own is in
-        (``OverlappedUpdates`` waits for a batch in the buffer)."""
-        if self.fine_tuning.experience:
-            experience = self.policies.experience(spec.initial_policy)
-            if experience is not None:
-                add_experience(model.replay_buffer,
-                               {name: values[-self.fine_tuning.experience:] for name, values in experience.items()})
-        first_batch = self.fine_tuning.batch_size or model.batch_size
-        model.learning_starts = model.num_timesteps + (first_batch if self.fine_tuning.first_actions == "random" else 0)
-
-    def _tune(self, model) -> None:
-        """The goal's schedule on whichever model it trains (stored, checkpointed or warm)."""
-        if self.fine_tuning.batch_size is not None:
-            model.batch_size = self.fine_tuning.batch_size
-        model.gradient_steps = SAC_KWARGS["gradient_steps"]
-        if self.fine_tuning.learning_rate is not None:
-            model.learning_rate = self.fine_tuning.learning_rate
-            model._setup_lr_schedule()  # SB3's optimisers read the rate from the schedule at each update
-
-    def _seeded(self, spec: TrainSpec, model, vec_env: BatchVecEnv, resumed: int) -> None:
-        """Seed the goal's random streams: SAC's sampling and, for a seeded goal, its sim episodes.
-
-        A goal with a seed is a function of its initial policy, its spec and
-        its seed, whatever ran on the learner and the sim before it: every
-        stream it draws from starts from a seed derived from it (numpy and
-        the action space through SB3's ``set_random_seed``, SBX's JAX keys, env k's
-        episodes from that seed + k at the first reset; each evaluation's
-        episodes from a seed of their own, see ``_evaluate_task``). A goal
-        resumed from its checkpoint at step s goes on exactly as the goal that
-        was not interrupted: the checkpoint holds the generators' states, and
-        both start new episodes there from a seed derived from s (see
-        ``_cut_episodes``). The exception: a warm model (``keep_replay_buffer``)
-        brings the previous goal's buffer, which a restarted learner no longer
-        has. Without a seed, a new model is seeded with the trainer's seed and
-        the sim's episodes continue its own streams; a warm model continues its
-        streams.
-        """
-        from stable_baselines3.common.utils import set_random_seed
-
-        if resumed:  # the generators are the checkpoint's; the episodes start as the cut's did
-            if spec.seed is not None:
-                vec_env.seed(derived_seed(spec.seed, TRAINING_STREAM, resumed))
-        elif spec.seed is not None:
-            seed = derived_seed(spec.seed, TRAINING_STREAM, 0)
-            model.set_random_seed(seed)  # the vec env's first reset too
-            seed_keys(model, seed)
-        elif not (self._warm and self._warm[2] is model):
-            set_random_seed(self.seed)  # what model.set_random_seed does, less the envs' seeds
-            model.action_space.seed(self.seed)
-            seed_keys(model, self.seed)
-
-    def _cut_episodes(self, spec: TrainSpec, model, vec_env: BatchVecEnv, steps: int) -> None:
-        """End every running episode and start new ones, as a goal resumed from a checkpoint here starts.
-
-        The cut episodes' last transitions are in the buffer as they were (not
-        done: SAC bootstraps from their next observation, as at a time limit);
-        the sim records the episodes as interrupted.
-        """
-        if spec.seed is not None:
-            vec_env.seed(derived_seed(spec.seed, TRAINING_STREAM, steps))
-        model._last_obs = vec_env.reset()
-        model._last_episode_starts = np.ones(vec_env.num_envs, dtype=bool)
-
-    def _evaluate_task(self, model, spec: TrainSpec, state: _GoalState, steps: int,
-                       on_evaluation: Callable[[Score, int], None]) -> None:
-        """Score ``model`` on the goal's task as the policy after ``steps`` of the goal's training steps."""
-        seed = None if spec.seed is None else derived_seed(spec.seed, EVALUATION_STREAM, steps)
-        (score,) = evaluate(self.envs, lambda obs: model.predict(obs, deterministic=True)[0], [spec.task],
-                            spec.eval_episodes, policy_name=spec.output_policy, seed=seed,
-                            global_step=self.total_steps)
-        state.score = asdict(score)
-        state.learned = passes_threshold(score.successes, spec.threshold)
-        state.steps_at_last_eval = steps
-        on_evaluation(score, steps)
+        return _outcome(state, True, f"finished before, not trained again: {state.steps_used} steps")
 
     def _store(self, spec: TrainSpec, model, state: _GoalState) -> PolicyRecord:
         parent = self.policies.record(spec.initial_policy)
@@ -336,7 +261,7 @@ class Trainer:
             name=spec.output_policy, task=spec.task or ",".join(sorted(set(spec.episode_tasks))),
             parent=spec.initial_policy, steps_trained=parent.steps_trained + state.steps_used,
             last_score=float(state.score["successes"]) if state.score else -1.0,
-            last_score_task=spec.task if state.score else "",
+            last_score_task=spec.task if state.score else "", profile=self.profile.name,
             extra={"learned": state.learned, "threshold": spec.threshold, "eval_episodes": spec.eval_episodes},
         )
         experience = self.fine_tuning.experience
@@ -345,28 +270,12 @@ class Trainer:
         self._warm = (spec.output_policy, str(self.policies.store.root / stored.name / stored.model_file), model)
         return stored
 
-    def _save_checkpoint(self, folder: Path, spec: TrainSpec, model, state: _GoalState, cycle: TaskCycle) -> None:
-        """Model and buffer under new names, then the json naming them: a kill leaves the last whole one."""
-        folder.mkdir(parents=True, exist_ok=True)
-        previous = _read_checkpoint(folder)
-        version = previous["version"] + 1 if previous else 1
-        model_file, buffer_file = f"model-{version}.zip", f"buffer-{version}.npz"
-        atomic_write(folder / model_file, model.save)
-        atomic_write(folder / buffer_file, lambda stream: save_replay_buffer(model.replay_buffer, stream))
-        text = json.dumps({"version": version, "spec": _spec_key(spec), "model": model_file, "buffer": buffer_file,
-                           "state": asdict(state), "random_state": random_state(model),
-                           "task_position": cycle.position}).encode()
-        atomic_write(folder / CHECKPOINT_FILE, lambda stream: stream.write(text))
-        if previous:
-            for name in (previous["model"], previous["buffer"]):
-                (folder / name).unlink(missing_ok=True)
-
-    @staticmethod
-    def _outcome(state: _GoalState, completed: bool, message: str) -> TrainOutcome:
-        score = Score(**state.score) if state.score else None
-        return TrainOutcome(state.learned, score, state.steps_used,
-                            [EpisodeSummary(**e) for e in state.episodes], message, completed)
-
+    def _warm_model(self, spec: TrainSpec):
+        """The previous goal's model when ``spec`` continues it (``keep_replay_buffer``), else None."""
+        store_path = str(self.policies.model_path(spec.initial_policy))
+        if spec.keep_replay_buffer and self._warm and self._warm[:2] == (spec.initial_policy, store_path):
+            return self._warm[2]
+        return None
 
 
 class _Goal:
@@ -375,7 +284,7 @@ class _Goal:
     The loop is SB3's ``learn``; each vector step runs, in this order:
     1. ``at_step_start`` (SB3's rollout start): when a checkpoint is due, the
        owed gradient steps are paid, the checkpoint written, and the running
-       episodes cut (``Trainer._cut_episodes``).
+       episodes cut (``cut_episodes``).
     2. SB3 draws the N actions.
     3. ``BatchVecEnv.step_wait`` sends them; while the sim computes the step,
        the previous step's gradient steps are paid (``OverlappedUpdates``);
@@ -389,21 +298,24 @@ class _Goal:
     policy stored, the outcome kept for a client that asks again.
     """
 
-    def __init__(self, trainer: "Trainer", spec: TrainSpec, on_progress: Callable[[TrainProgress], None],
+    def __init__(self, trainer: Trainer, spec: TrainSpec, on_progress: Callable[[TrainProgress], None],
                  should_stop: Callable[[], str], between_steps: Callable[[], bool],
                  on_evaluation: Callable[[Score, int], None]):
-        self.trainer, self.spec = trainer, spec
+        self.trainer, self.spec, self.tuning = trainer, spec, trainer.fine_tuning
         self.on_progress, self.should_stop, self.owner_between_steps = on_progress, should_stop, between_steps
         self.on_evaluation = on_evaluation
         self.checkpoint_dir = trainer.checkpoint_root / spec.output_policy
         self.state = _GoalState()
         self.cycle = TaskCycle(spec.episode_tasks or (spec.task,))
-        self.vec_env = BatchVecEnv(trainer.envs, *trainer._spaces(spec), self.cycle, policy_name=spec.output_policy,
-                                   global_step=lambda: trainer.total_steps, between_steps=self.between_steps)
-        self.model, self.resumed = trainer._model(spec, self.vec_env, self.checkpoint_dir, self.state, self.cycle)
-        trainer._seeded(spec, self.model, self.vec_env, self.resumed)
-        trainer._tune(self.model)
-        self.updates = OverlappedUpdates(self.model)
+        initial = trainer.policies.model(spec.initial_policy)  # SB3 refuses an env whose Box bounds differ
+        self.vec_env = BatchVecEnv(trainer.envs, initial.observation_space, initial.action_space, self.cycle,
+                                   policy_name=spec.output_policy, global_step=lambda: trainer.total_steps,
+                                   between_steps=self.between_steps,
+                                   time_limit_terminal=trainer.profile.time_limit_terminal)
+        self.model, self.resumed = self.model_to_train()
+        self.seed_streams()
+        self.tune()
+        self.updates = OverlappedUpdates(self.model, inclusive_start=self.tuning.random_steps is not None)
         self.vec_env.while_stepping = self.updates.pay
         self.start_timesteps = self.model.num_timesteps - self.state.steps_used  # the model's count at step 0
         self.last_checkpoint = self.state.steps_used
@@ -411,6 +323,92 @@ class _Goal:
         self.started = time.monotonic()
         self.recent: deque[bool] = deque(maxlen=50)  # successes of the last episodes, for progress
         self.stop_reason = ""
+
+    def model_to_train(self):
+        """The model to train and the step it resumes from (0 for a new goal)."""
+        spec, trainer = self.spec, self.trainer
+        saved = _read_checkpoint(self.checkpoint_dir)
+        if saved is not None and saved["spec"] == _spec_key(spec):
+            if saved.get("learner") != trainer.learner_key:
+                raise ValueError(f"the checkpoint of {spec.output_policy!r} at step {saved['state']['steps_used']} "
+                                 f"was trained with {saved.get('learner')}, this learner runs "
+                                 f"{trainer.learner_key}: send the goal to a learner of those settings, or "
+                                 f"delete {self.checkpoint_dir} to train it again")
+            model = load_model(self.checkpoint_dir / saved["model"], env=self.vec_env)
+            if not load_replay_buffer(model.replay_buffer, self.checkpoint_dir / saved["buffer"]):
+                self.start_buffer(model)
+            self.state.__dict__.update(saved["state"])
+            restore_random_state(model, saved["random_state"])
+            self.cycle.position = saved["task_position"]
+            return model, self.state.steps_used
+        model = trainer._warm_model(spec)
+        if model is not None:
+            model.set_env(self.vec_env, force_reset=True)
+            if self.tuning.rearm_warm:
+                model.learning_starts = model.num_timesteps + self.tuning.random_steps
+            return model, 0
+        model = load_model(str(trainer.policies.model_path(spec.initial_policy)), env=self.vec_env)
+        self.start_buffer(model)
+        self.state.critic_warmup = self.tuning.critic_warmup  # a warm model's critic has seen its data
+        start_fine_tuning(model, self.tuning, spec.episode_tasks or (spec.task,))
+        return model, 0
+
+    def start_buffer(self, model) -> None:
+        """Fill the new model's empty buffer with the initial policy's experience (``FineTuning.experience``),
+        and act as ``FineTuning.first_actions`` says until its random steps are over (``OverlappedUpdates``
+        waits for a batch in the buffer)."""
+        if self.tuning.experience:
+            experience = self.trainer.policies.experience(self.spec.initial_policy)
+            if experience is not None:
+                add_experience(model.replay_buffer,
+                               {name: values[-self.tuning.experience:] for name, values in experience.items()})
+        random_steps = 0
+        if self.tuning.first_actions == "random":
+            random_steps = self.tuning.random_steps or self.tuning.batch_size or model.batch_size
+        model.learning_starts = model.num_timesteps + random_steps
+
+    def tune(self) -> None:
+        """The goal's schedule on whichever model it trains (stored, checkpointed or warm)."""
+        model = self.model
+        if self.tuning.batch_size is not None:
+            model.batch_size = self.tuning.batch_size
+        model.gradient_steps = SAC_KWARGS["gradient_steps"]
+        if self.tuning.learning_rate is not None:
+            model.learning_rate = self.tuning.learning_rate
+            model._setup_lr_schedule()  # SB3's optimisers read the rate from the schedule at each update
+
+    def seed_streams(self) -> None:
+        """Seed the goal's random streams: SAC's sampling and, for a seeded goal, its sim episodes.
+
+        A goal with a seed is a function of its initial policy, its spec and
+        its seed, whatever ran on the learner and the sim before it: every
+        stream it draws from starts from a seed derived from it (numpy and
+        the action space through SB3's ``set_random_seed``, SBX's JAX keys, env k's
+        episodes from that seed + k at the first reset; each evaluation's
+        episodes from a seed of their own, see ``evaluate``). A goal
+        resumed from its checkpoint at step s goes on exactly as the goal that
+        was not interrupted: the checkpoint holds the generators' states, and
+        both start new episodes there from a seed derived from s (see
+        ``cut_episodes``). The exception: a warm model (``keep_replay_buffer``)
+        brings the previous goal's buffer, which a restarted learner no longer
+        has. Without a seed, a new model is seeded with the trainer's seed and
+        the sim's episodes continue its own streams; a warm model continues its
+        streams.
+        """
+        from stable_baselines3.common.utils import set_random_seed
+
+        spec, model, trainer = self.spec, self.model, self.trainer
+        if self.resumed:  # the generators are the checkpoint's; the episodes start as the cut's did
+            if spec.seed is not None:
+                self.vec_env.seed(derived_seed(spec.seed, TRAINING_STREAM, self.resumed))
+        elif spec.seed is not None:
+            seed = derived_seed(spec.seed, TRAINING_STREAM, 0)
+            model.set_random_seed(seed)  # the vec env's first reset too
+            seed_keys(model, seed)
+        elif not (trainer._warm and trainer._warm[2] is model):
+            set_random_seed(trainer.seed)  # what model.set_random_seed does, less the envs' seeds
+            model.action_space.seed(trainer.seed)
+            seed_keys(model, trainer.seed)
 
     @property
     def steps(self) -> int:
@@ -441,7 +439,7 @@ class _Goal:
         if self.stop_reason:
             self.save_checkpoint()
             trainer._warm = None
-            return trainer._outcome(state, False, f"stopped after {state.steps_used} steps: {self.stop_reason}")
+            return _outcome(state, False, f"stopped after {state.steps_used} steps: {self.stop_reason}")
         if spec.task and (state.score is None or state.steps_at_last_eval != state.steps_used):
             self.evaluate(state.steps_used)
         stored = trainer._store(spec, self.model, state)
@@ -450,7 +448,7 @@ class _Goal:
         if self.resumed:
             message += f" (resumed from a checkpoint at step {self.resumed})"
         trainer._mark_finished(self.checkpoint_dir, spec, state, stored.model_file)
-        return trainer._outcome(state, True, message)
+        return _outcome(state, True, message)
 
     def at_step_start(self) -> None:
         """Step 1: before the actions are drawn, the last step's transition is in the buffer, so a
@@ -458,7 +456,7 @@ class _Goal:
         if self.steps - self.last_checkpoint >= self.trainer.checkpoint_interval:
             with self.updates.settled():
                 self.save_checkpoint()
-            self.trainer._cut_episodes(self.spec, self.model, self.vec_env, self.steps)
+            self.cut_episodes()
 
     def between_steps(self) -> bool:
         """Step 3, with the step back: True when the envs were used (their episodes are gone)."""
@@ -499,12 +497,53 @@ class _Goal:
             self.updates.owe(self.vec_env.num_envs, critic_only=steps <= state.critic_warmup)
         return keep_going
 
+    def cut_episodes(self) -> None:
+        """End every running episode and start new ones, as a goal resumed from a checkpoint here starts.
+
+        The cut episodes' last transitions are in the buffer as they were (not
+        done: SAC bootstraps from their next observation, as at a time limit);
+        the sim records the episodes as interrupted.
+        """
+        if self.spec.seed is not None:
+            self.vec_env.seed(derived_seed(self.spec.seed, TRAINING_STREAM, self.steps))
+        self.model._last_obs = self.vec_env.reset()
+        self.model._last_episode_starts = np.ones(self.vec_env.num_envs, dtype=bool)
+
     def evaluate(self, steps: int) -> None:
-        self.trainer._evaluate_task(self.model, self.spec, self.state, steps, self.on_evaluation)
+        """Score the model on the goal's task as the policy after ``steps`` of the goal's training steps."""
+        spec, state = self.spec, self.state
+        seed = None if spec.seed is None else derived_seed(spec.seed, EVALUATION_STREAM, steps)
+        (score,) = evaluate(self.trainer.envs, lambda obs: self.model.predict(obs, deterministic=True)[0],
+                            [spec.task], spec.eval_episodes, policy_name=spec.output_policy, seed=seed,
+                            global_step=self.trainer.total_steps)
+        state.score = asdict(score)
+        state.learned = passes_threshold(score.successes, spec.threshold)
+        state.steps_at_last_eval = steps
+        self.on_evaluation(score, steps)
 
     def save_checkpoint(self) -> None:
-        self.trainer._save_checkpoint(self.checkpoint_dir, self.spec, self.model, self.state, self.cycle)
+        """Model and buffer under new names, then the json naming them: a kill leaves the last whole one."""
+        folder, model = self.checkpoint_dir, self.model
+        folder.mkdir(parents=True, exist_ok=True)
+        previous = _read_checkpoint(folder)
+        version = previous["version"] + 1 if previous else 1
+        model_file, buffer_file = f"model-{version}.zip", f"buffer-{version}.npz"
+        atomic_write(folder / model_file, model.save)
+        atomic_write(folder / buffer_file, lambda stream: save_replay_buffer(model.replay_buffer, stream))
+        text = json.dumps({"version": version, "spec": _spec_key(self.spec), "learner": self.trainer.learner_key,
+                           "model": model_file, "buffer": buffer_file, "state": asdict(self.state),
+                           "random_state": random_state(model), "task_position": self.cycle.position}).encode()
+        atomic_write(folder / CHECKPOINT_FILE, lambda stream: stream.write(text))
+        if previous:
+            for name in (previous["model"], previous["buffer"]):
+                (folder / name).unlink(missing_ok=True)
         self.last_checkpoint = self.state.steps_used
+
+
+def _outcome(state: _GoalState, completed: bool, message: str) -> TrainOutcome:
+    score = Score(**state.score) if state.score else None
+    return TrainOutcome(state.learned, score, state.steps_used,
+                        [EpisodeSummary(**e) for e in state.episodes], message, completed)
 
 
 class _StepCallback(BaseCallback):

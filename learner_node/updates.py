@@ -29,8 +29,11 @@ from typing import Iterator
 class OverlappedUpdates:
     """Within ``with``, ``model.learn`` collects only; ``pay`` runs the gradient steps it owes."""
 
-    def __init__(self, model):
+    def __init__(self, model, inclusive_start: bool = False):
         self.model = model
+        # SB3 updates from the step after the one that reaches learning_starts; Stable Baselines 2 from
+        # that very step (its first gradient step follows the learning_starts-th transition).
+        self.inclusive_start = inclusive_start
         self.owed = 0
         self.owed_critic_only = 0
         self._gradient_steps = model.gradient_steps  # the model's own setting, restored on exit
@@ -48,14 +51,15 @@ class OverlappedUpdates:
     def owe(self, env_steps: int, critic_only: bool = False) -> None:
         """After a vector step of ``env_steps`` that SB3 would follow with updates: what it would do.
 
-        SB3 starts updating after ``learning_starts``; a goal that acts with its
+        SB3 starts updating after ``learning_starts`` (SB2, ``inclusive_start``: at it); a goal that acts with its
         policy from the first step (``learning_starts`` at the goal's start) also
         waits until the buffer holds a batch: SB3 would sample one from fewer rows.
         ``critic_only``: these gradient steps leave the actor as it is.
         """
         buffer = self.model.replay_buffer
         batch_in = buffer.size() * buffer.n_envs >= self.model.batch_size  # size(): rows of n_envs transitions
-        if self.model.num_timesteps > self.model.learning_starts and batch_in:
+        started = self.model.num_timesteps - self.model.learning_starts >= (0 if self.inclusive_start else 1)
+        if started and batch_in:
             steps = self._gradient_steps if self._gradient_steps >= 0 else env_steps
             if critic_only:
                 self.owed_critic_only += steps

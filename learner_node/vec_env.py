@@ -10,6 +10,9 @@ Between two steps, ``between_steps`` may use the same envs for something else
 gone, so the VecEnv starts new ones and reports the cut episodes as
 truncated, with the true last observation as ``terminal_observation``: SAC
 bootstraps from it as it does at a time limit, and no transition is made up.
+With ``time_limit_terminal`` (the ``paper`` learner profile) the sim's own
+time-limit ends are reported as terminal instead, so SAC does not bootstrap
+from them; the cuts above still bootstrap.
 
 ``while_stepping`` runs during every step, between ``start_step`` and its
 finish: after the batch was sent to the sim node, so the learner's own work
@@ -61,8 +64,10 @@ class BatchVecEnv(VecEnv):
         global_step: Callable[[], int] = lambda: 0,
         between_steps: Callable[[], bool] = lambda: False,
         while_stepping: Callable[[], None] = lambda: None,
+        time_limit_terminal: bool = False,
     ):
         self.envs = envs
+        self.time_limit_terminal = time_limit_terminal
         self.tasks = iter(tasks)
         self.policy_name = policy_name
         self.global_step = global_step
@@ -108,8 +113,8 @@ class BatchVecEnv(VecEnv):
         for i in np.flatnonzero(dones):
             self.finished.append(EpisodeSummary(self._running[i], float(self._returns[i]), int(self._lengths[i]),
                                                  bool(batch.is_success[i])))
-            infos[i] = self._end_info(batch.terminal_observations[i], bool(batch.truncated[i] and not batch.terminated[i]),
-                                      bool(batch.is_success[i]))
+            time_limit = bool(batch.truncated[i] and not batch.terminated[i]) and not self.time_limit_terminal
+            infos[i] = self._end_info(batch.terminal_observations[i], time_limit, bool(batch.is_success[i]))
             self._running[i], self._reserved[i] = self._reserved[i], next(self.tasks)
             self._returns[i], self._lengths[i] = 0.0, 0
         observations = batch.observations

@@ -62,6 +62,7 @@ import pybullet
 from gymnasium import spaces
 from pybullet_utils.bullet_client import BulletClient
 
+from glocal_ros.sim_contract import DEFAULT_EPISODE_STEPS
 from glocal_ros.spaces import ACTION_DIM, OBS_DIM, PHYSICS_TIMESTEP, SUBSTEPS
 from glocal_ros.tasks import NUM_TASKS, PRIOR_TASK, task_index
 from sim_node.grasp_world import OBJECT_SPOT, TABLE_TOP_Z, GraspWorld
@@ -90,7 +91,7 @@ _OBS_OBJECT_REACH = 1.0
 class GraspEnvConfig:
     """Parameters of ``GraspEnv``; defaults follow the verified probe setup."""
 
-    max_steps: int = 50
+    max_steps: int = DEFAULT_EPISODE_STEPS
     """Episode length T: the episode truncates after this many steps."""
     substeps: int = SUBSTEPS
     """Physics steps per env step."""

@@ -23,9 +23,9 @@ def test_bench_learner_reports_one_row_per_env_count():
     (row,) = rows
     assert (row.num_envs, row.workers) == (1, 1)
     assert row.in_process > 0 and row.through_ros > 0 and row.learner_node > 0
-    assert row.ratio > 0 and row.learner_node_ratio > 0
-    assert [len(run) for run in row.rounds] == [1, 1, 1]
-    assert len(log) == 4  # three measurements and the summary
+    assert row.ratio > 0 and row.learner_node_ratio > 0 and row.env_floor > 0 and row.floor_ratio > 0
+    assert [len(run) for run in row.rounds] == [1, 1, 1, 1]
+    assert len(log) == 5  # four measurements and the summary
 
     report = learner_bench_report(rows, "glocal-ros bench learner --envs 1", steps=1000, rounds=1)
     lines = report.splitlines()
@@ -33,7 +33,7 @@ def test_bench_learner_reports_one_row_per_env_count():
     assert "Command: `glocal-ros bench learner --envs 1`" in report
     table = [line for line in lines if line.startswith("|")]
     assert len(table) == 3  # header, alignment, one row
-    assert all(line.count("|") == 7 for line in table)  # six columns
+    assert all(line.count("|") == 9 for line in table)  # eight columns
     cells = [cell.strip() for cell in table[2].strip("|").split("|")]
     assert cells[0] == "1" and cells[2].endswith("(1)")
     assert all(float(cell.split()[0]) > 0 for cell in cells[1:])
@@ -41,17 +41,19 @@ def test_bench_learner_reports_one_row_per_env_count():
 
 
 def test_bench_learner_without_learner_node_shows_a_dash():
-    row = LearnerBenchRow(2, 80.0, 72.0, None, 2, ((80.0,), (72.0,)))
+    row = LearnerBenchRow(2, 80.0, 72.0, None, 2, ((80.0,), (72.0,), (144.0,)), env_floor=144.0)
     report = learner_bench_report([row], "glocal-ros bench learner --no-learner-node", steps=10, rounds=1)
     (line,) = [line for line in report.splitlines() if line.startswith("| 2 ")]
-    assert [cell.strip() for cell in line.strip("|").split("|")] == ["2", "80.0", "72.0 (2)", "-", "0.90", "-"]
+    assert [cell.strip() for cell in line.strip("|").split("|")] == \
+        ["2", "80.0", "72.0 (2)", "-", "144.0", "0.90", "-", "0.50"]  # the graph is via sim_node here
 
 
 def test_bench_learner_command_line():
     args = build_parser().parse_args(["bench", "learner", "--envs", "1,2", "--steps", "100", "--rounds", "2",
                                       "--no-learner-node", "--out", "x.md"])
     assert args.func is cmd_bench_learner
-    assert (args.envs, args.steps, args.rounds, args.no_learner_node, args.out) == ("1,2", 100, 2, True, Path("x.md"))
+    assert (args.envs, args.steps, args.rounds, args.no_learner_node, args.out, args.profile) == \
+        ("1,2", 100, 2, True, Path("x.md"), "glocal_ros")
 
 
 def test_bench_backends_times_both_libraries_learning_on_the_grasp_env():
@@ -109,15 +111,17 @@ def test_bench_transfer_runs_every_arm_on_the_same_episodes_and_tabulates_them(t
     report = transfer_bench_report(goals, "glocal-ros bench transfer --tasks A0", settings, jobs=2)
     assert report.startswith("# bench transfer")
     assert "Command: `glocal-ros bench transfer --tasks A0`" in report
-    rows = [line for line in report.splitlines() if line.startswith(("| random-first |", "| policy-first |"))]
+    rows = [line for line in report.splitlines()
+            if line.startswith(("| glocal_ros | random-first |", "| glocal_ros | policy-first |"))]
     assert len(rows) == 8  # one summary row and one goal row per arm
-    assert all(line.count("|") == 13 for line in rows[:4])  # twelve summary columns
-    assert all(line.count("|") == 11 for line in rows[4:])  # recipe, prior, task, seed, 3 scores, to B, drop, s
+    assert all(line.count("|") == 14 for line in rows[:4])  # thirteen summary columns
+    assert all(line.count("|") == 12 for line in rows[4:])  # profile, recipe, prior, task, seed, 3 scores, to B, drop, s
 
     # The same goals through a sim_node and a learner_node: the same episodes, so the same start.
     (through_graph,) = run_transfer_graph(["policy-first"], ["A0"], [5], settings, log=log.append,
                                           priors=["prior-copy"], prior_store=prior_store)
-    assert (through_graph.arm, through_graph.task, through_graph.seed) == (("policy-first", "prior-copy"), "A0", 5)
+    assert (through_graph.arm, through_graph.task, through_graph.seed) == \
+        (("glocal_ros", "policy-first", "prior-copy"), "A0", 5)
     assert [steps for steps, _ in through_graph.curve] == [0, 4, 8]
     assert through_graph.start == goals[1].start
     assert "through the graph" in transfer_bench_report([through_graph], "x", settings, jobs=1, graph=True)
@@ -142,11 +146,12 @@ def test_a_transfer_report_is_read_back_and_tabulated_with_another(tmp_path, cap
     assert cmd_bench_transfer(args) == 0
     report = out.read_text()
     assert f"the goals of `{first}`, `{second}`" in report
-    summary = {line.split("|")[1].strip(): [cell.strip() for cell in line.strip("|").split("|")]
-               for line in report.splitlines() if line.startswith(("| a | prior | 2 ", "| b | prior | 1 "))}
+    summary = {line.split("|")[2].strip(): [cell.strip() for cell in line.strip("|").split("|")]
+               for line in report.splitlines()
+               if line.startswith(("| glocal_ros | a | prior | 2 ", "| glocal_ros | b | prior | 1 "))}
     # goals, passed B, median steps to B, started below B, of those passed, their median steps to B, collapses
-    assert summary["a"][2:9] == ["2", "2", "500", "1", "1", "1000", "1"]
-    assert summary["b"][2:9] == ["1", "0", "never", "1", "0", "never", "0"]
+    assert summary["a"][3:10] == ["2", "2", "500", "1", "1", "1000", "1"]
+    assert summary["b"][3:10] == ["1", "0", "never", "1", "0", "never", "0"]
 
     # Another budget, or a file without the table: refused, naming the file, nothing written.
     out.unlink()
@@ -156,7 +161,8 @@ def test_a_transfer_report_is_read_back_and_tabulated_with_another(tmp_path, cap
         assert not out.exists()
     errors = capsys.readouterr().err
     assert f"{first}: its goals were scored at steps 0, 500, 1000" in errors
-    assert "(recipe, prior, task, seed) = a, prior, B1, 0 is in the reports more than once" in errors
+    assert "(profile, recipe, prior, task, seed) = glocal_ros, a, prior, B1, 0 is in the reports more than once" \
+        in errors
 
 
 def test_a_transfer_curve_gives_steps_to_b_and_collapse():
@@ -174,6 +180,9 @@ def test_a_transfer_curve_gives_steps_to_b_and_collapse():
 
 @pytest.mark.parametrize("change, message", [
     (dict(recipes=["rlpd"]), "unknown fine-tuning recipe"),
+    (dict(profiles=["sb2"]), "unknown learner profile 'sb2'"),
+    (dict(profiles=["paper"]), "recipe 'random-first' contradicts learner profile 'paper'"),
+    (dict(profiles=["glocal_ros", "glocal_ros"], recipes=["default"]), "must not repeat"),
     (dict(priors=["no-such-prior"]), "no prior 'no-such-prior'"),
     (dict(priors=["../prior"]), "invalid policy name"),
     (dict(priors=[]), "a prior"),
@@ -201,6 +210,7 @@ def test_bench_transfer_command_line():
     assert args.func is cmd_bench_transfer
     assert (args.recipes, args.tasks, args.seeds, args.budget, args.eval_interval, args.eval_episodes, args.envs,
             args.out) == ("policy-first", "A0,B1", "0,1", 1000, 250, 20, 4, Path("bench/results/transfer.md"))
-    assert (args.priors, args.prior_store) == ("prior", None)
+    assert (args.priors, args.prior_store, args.profiles) == ("prior", None, "glocal_ros")
+    assert build_parser().parse_args(["bench", "transfer"]).recipes == "default"
     args = build_parser().parse_args(["bench", "transfer", "--priors", "prior,prior-64x64", "--prior-store", "p"])
     assert (args.priors, args.prior_store) == ("prior,prior-64x64", Path("p"))

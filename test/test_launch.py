@@ -217,7 +217,19 @@ def test_launch_refuses_a_bad_domain_id_or_namespace_before_anything_starts(tmp_
     assert not (tmp_path / "run").exists(), "nothing was claimed or started"
 
 
-def test_namespace_and_sim_time_reach_launch_and_experiment(monkeypatch, tmp_path):
+def test_the_presets_give_the_sim_and_the_curriculum_one_episode_length(tmp_path):
+    from glocal_app.launch import check_episode_steps
+    from glocal_app.processes import preset_file
+
+    for preset in ("smoke", "demo", "bench", "paper"):
+        check_episode_steps(preset)
+    text = preset_file("smoke").read_text().replace("max_steps: 20", "max_steps: 30")
+    (tmp_path / "mine.yaml").write_text(text)
+    with pytest.raises(ValueError, match="preset mine: sim_node max_steps 30 and curriculum_node max_episode_steps 20"):
+        check_episode_steps("mine", tmp_path)
+
+
+def test_namespace_sim_time_and_profile_reach_launch_and_experiment(monkeypatch, tmp_path):
     import glocal_app.launch
     from glocal_app.cli import main
 
@@ -225,7 +237,7 @@ def test_namespace_and_sim_time_reach_launch_and_experiment(monkeypatch, tmp_pat
     monkeypatch.setattr(glocal_app.launch, "launch", lambda *args, **kwargs: calls.append((args, kwargs)) or 0)
     monkeypatch.setattr(glocal_app.launch, "experiment", lambda *args, **kwargs: calls.append((args, kwargs)) or 0)
     assert main(["launch", "--preset", "smoke", "--out", str(tmp_path), "--namespace", "robot1",
-                 "--use-sim-time"]) == 0
+                 "--use-sim-time", "--profile", "paper"]) == 0
     assert main(["experiment", "--strategies", "random", "--seeds", "0", "--out", str(tmp_path)]) == 0
-    assert calls[0][1] == {"namespace": "robot1", "use_sim_time": True}
-    assert calls[1][1] == {"namespace": "", "use_sim_time": False, "step_budget": None}
+    assert calls[0][1] == {"namespace": "robot1", "use_sim_time": True, "learner_profile": "paper"}
+    assert calls[1][1] == {"namespace": "", "use_sim_time": False, "step_budget": None, "learner_profile": None}

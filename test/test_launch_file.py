@@ -29,7 +29,7 @@ from glocal_app.processes import RUN_NODES, run_parameters
 from glocal_ros.curriculum.codes import STRATEGY_NAMES
 
 LAUNCH_FILE = REPO / "launch" / "glocal.launch.py"
-ARGUMENTS = {"strategy", "preset", "seed", "out", "namespace", "use_sim_time"}
+ARGUMENTS = {"strategy", "preset", "seed", "out", "namespace", "use_sim_time", "learner_profile"}
 #: What the launch file may import: ROS's launch API, the ament index and the stdlib-only plan.
 ALLOWED_IMPORTS = {"__future__", "pathlib", "launch", "launch.actions", "launch.event_handlers", "launch.events",
                    "launch_ros.actions", "ament_index_python.packages", "glocal_app.processes"}
@@ -83,6 +83,15 @@ def test_its_strategies_are_the_curriculums():
     strategies = next(ast.literal_eval(n.value) for n in tree.body if isinstance(n, ast.Assign)
                       and getattr(n.targets[0], "id", None) == "STRATEGIES")
     assert tuple(strategies) == tuple(STRATEGY_NAMES)
+
+
+def test_its_learner_profiles_are_the_learners():
+    from learner_node.profiles import PROFILES
+
+    tree = ast.parse(LAUNCH_FILE.read_text())
+    profiles = next(ast.literal_eval(n.value) for n in tree.body if isinstance(n, ast.Assign)
+                    and getattr(n.targets[0], "id", None) == "LEARNER_PROFILES")
+    assert tuple(profiles) == tuple(PROFILES)
 
 
 def test_it_loads_no_project_dependency_and_no_ros_client(tmp_path):

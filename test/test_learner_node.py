@@ -98,8 +98,16 @@ def test_copy_policy_into_the_store(learner, ros_node, policy_dir):
     assert response.success and process.process.poll() is None
 
 
-def test_an_unknown_fine_tuning_recipe_stops_the_node_naming_the_parameter_and_the_choices(start_node, tmp_path):
-    node = start_node("learner_node", policy_dir=str(tmp_path / "policies"), fine_tuning="rlpd")
+@pytest.mark.parametrize("params, message", [
+    (dict(fine_tuning="rlpd"), "parameter fine_tuning: unknown fine-tuning recipe 'rlpd': choose from random-first, "
+                               "policy-first"),
+    (dict(learner_profile="sb2"), "parameter learner_profile: unknown learner profile 'sb2': choose from "
+                                  "glocal_ros, paper"),
+    (dict(learner_profile="paper", fine_tuning="parent-experience"),
+     "parameter fine_tuning: fine-tuning recipe 'parent-experience' contradicts learner profile 'paper'"),
+])
+def test_a_bad_profile_or_recipe_stops_the_node_naming_the_parameter_and_the_choices(start_node, tmp_path, params,
+                                                                                     message):
+    node = start_node("learner_node", policy_dir=str(tmp_path / "policies"), **params)
     assert node.process.wait(120) == 1
-    assert "parameter fine_tuning: unknown fine-tuning recipe 'rlpd': choose from random-first, policy-first" \
-        in node.log()
+    assert message in node.log()

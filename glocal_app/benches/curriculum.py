@@ -60,17 +60,21 @@ def bench_run_dirs(out: Path) -> list[Path]:
 
 
 def check_bench(strategies: Sequence[str], seeds: Sequence[int], preset: str, out: Path,
-                step_budget: int | None) -> None:
-    """``ValueError`` for what ``experiment`` refuses, and for any run under OUT of another preset or budget."""
+                step_budget: int | None, learner_profile: str | None = None) -> None:
+    """``ValueError`` for what ``experiment`` refuses, and for any run under OUT of another preset, budget or
+    learner profile."""
     from glocal_app.launch import check_experiment
 
-    check_experiment(strategies, seeds, preset, out, step_budget)
+    check_experiment(strategies, seeds, preset, out, step_budget, learner_profile=learner_profile)
     for run_dir in bench_run_dirs(out):
         found = recorded_run_settings(run_dir) or {}
-        if found.get("preset") != preset or found.get("step_budget") != step_budget:
-            raise ValueError(f"{run_dir} is a run of preset {found.get('preset')} and budget "
-                             f"{found.get('step_budget') or 'of its preset'}, not of preset {preset} and budget "
-                             f"{step_budget or 'of its preset'}: choose another --out")
+        wanted = (preset, step_budget, learner_profile)
+        if (found.get("preset"), found.get("step_budget"), found.get("learner_profile")) != wanted:
+            raise ValueError(f"{run_dir} is a run of preset {found.get('preset')}, budget "
+                             f"{found.get('step_budget') or 'of its preset'} and learner profile "
+                             f"{found.get('learner_profile') or 'of its preset'}, not of preset {preset}, budget "
+                             f"{step_budget or 'of its preset'} and learner profile "
+                             f"{learner_profile or 'of its preset'}: choose another --out")
 
 
 def read_bench_runs(run_dirs: Sequence[Path]) -> list[RunData]:

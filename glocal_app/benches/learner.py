@@ -1,7 +1,9 @@
 """``glocal-ros bench learner``: SAC env steps/s with updates, in-process vs through sim_node.
 
-For each N, the same Train goal (SAC from the shipped A0 ``prior`` on A0, the
-project's ``SAC_KWARGS``, one compute thread) runs on N envs three ways:
+For each N, the same Train goal (SAC from the learner profile's shipped A0
+``prior`` on G3, an object the prior is still learning, so that episodes run to
+their time limit as in a curriculum's goals rather than ending in a few steps;
+one compute thread) runs on N envs three ways:
 
 - in-process: the ``Trainer`` here on a ``BatchedEnvs`` here;
 - through sim_node: the same ``Trainer`` here on a ``SimClient`` of a sim_node
@@ -27,8 +29,11 @@ the final evaluation (1 episode) and storing the policy are not timed; no
 checkpoint falls inside a measurement. learner_node reports progress about
 once a second, so its timed span is the same up to a second less.
 
-Rounds alternate between the variants so that load on the shared machine
-hits all alike; the table reports medians and the ratios to in-process.
+Beside them, the floor no goal can beat: the same N envs in this process
+stepped with random actions and no learner (``bench sim``'s in-process
+rate). Rounds alternate between the variants so that load on the shared
+machine hits all alike; the table reports medians, the ratios to in-process
+and the ratio of learner_node to the floor.
 """
 
 from __future__ import annotations
@@ -45,19 +50,22 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Callable, Sequence
 
+import numpy as np
+
+from glocal_app.benches.sim import steps_per_second
 from glocal_app.processes import NodeProcess, isolated_environment
 from glocal_ros.domain import reserve_domain_id
-from glocal_ros.paths import assets_dir
 from glocal_ros.sim_contract import BatchStepper
 from node_common.runner import spinning_node
 from learner_node.policies import PolicyRegistry
 from learner_node.policy_store import PolicyStore
+from learner_node.profiles import DEFAULT_PROFILE, PROFILES, LearnerProfile
 from learner_node.sac_settings import DEFAULT_NETWORK, NETWORKS, SAC_KWARGS, COMPUTE_THREADS
 from learner_node.training import Trainer, TrainSpec
 
 #: Env steps of a goal after the update-free warm-up before the clock starts.
 SETTLE_STEPS = 64
-TASK = "A0"
+TASK = "G3"
 INITIAL_POLICY = "prior"
 BATCH_SIZE = NETWORKS[DEFAULT_NETWORK].batch_size  # the shipped prior's (train-prior's default network)
 
@@ -70,6 +78,7 @@ class LearnerBenchRow:
     learner_node: float | None  # env steps/s of a learner_node process's Train goal; None: not measured
     workers: int  # sim_node's worker processes
     rounds: tuple[tuple[float, ...], ...] = ()  # every measurement, per variant
+    env_floor: float | None = None  # env steps/s of the envs alone in this process, random actions
 
     @property
     def ratio(self) -> float:
@@ -79,6 +88,12 @@ class LearnerBenchRow:
     def learner_node_ratio(self) -> float | None:
         return None if self.learner_node is None else self.learner_node / self.in_process
 
+    @property
+    def floor_ratio(self) -> float | None:
+        """The graph's rate (learner_node, else via sim_node) as a share of the envs' own."""
+        graph = self.through_ros if self.learner_node is None else self.learner_node
+        return None if self.env_floor is None else graph / self.env_floor
+
 
 def warmup_steps(num_envs: int) -> int:
     """Goal steps before the clock starts: updates run from ``batch_size`` steps on."""
@@ -86,10 +101,11 @@ def warmup_steps(num_envs: int) -> int:
 
 
 def train_steps_per_second(envs: BatchStepper, policies: PolicyRegistry, work_dir: Path, output_policy: str,
-                           num_envs: int, steps: int, seed: int = 0) -> float:
+                           num_envs: int, steps: int, seed: int = 0,
+                           profile: LearnerProfile = PROFILES[DEFAULT_PROFILE]) -> float:
     """Run one Train goal of ``warmup_steps + steps`` env steps; env steps/s over the timed part."""
     trainer = Trainer(envs, policies, work_dir / ".checkpoints", seed, checkpoint_interval=10**12,
-                      progress_interval_sec=0.0)
+                      progress_interval_sec=0.0, profile=profile)
     warmup = warmup_steps(num_envs)
     spec = TrainSpec(task=TASK, initial_policy=INITIAL_POLICY, output_policy=output_policy,
                      step_budget=warmup + steps, threshold=0.0, eval_episodes=1, eval_interval=0)
@@ -155,7 +171,7 @@ def _wait(future, timeout: float, what: str):
 
 
 def run_learner_bench(env_counts: Sequence[int], steps: int, rounds: int, learner_node: bool = True,
-                      log: Callable[[str], None] = print) -> list[LearnerBenchRow]:
+                      log: Callable[[str], None] = print, profile: str = DEFAULT_PROFILE) -> list[LearnerBenchRow]:
     from learner_node.sim_client import SimClient
     from sim_node.batch import BatchedEnvs
     from sim_node.grasp_env import GraspEnv
@@ -163,7 +179,9 @@ def run_learner_bench(env_counts: Sequence[int], steps: int, rounds: int, learne
     domain_id, lock = reserve_domain_id()
     work = Path(tempfile.mkdtemp(prefix="glocal-bench-learner-"))
     logs = work / "logs"
-    policies = PolicyRegistry(PolicyStore(work / "policies"), [PolicyStore(assets_dir() / "priors")], seed=0)
+    learner_profile = PROFILES[profile]
+    policies = PolicyRegistry(PolicyStore(work / "policies"), [PolicyStore(learner_profile.shipped_priors())], seed=0)
+    rng = np.random.default_rng(0)
     rows = []
     stack = ExitStack()
     try:
@@ -179,13 +197,15 @@ def run_learner_bench(env_counts: Sequence[int], steps: int, rounds: int, learne
             variants: list[tuple[str, Callable[[str], float]]] = []
             batch = BatchedEnvs(lambda i: GraspEnv(TASK), num_envs, TASK)
             variants.append(("in-process", lambda name: train_steps_per_second(
-                batch, policies, work, name, num_envs, steps)))
+                batch, policies, work, name, num_envs, steps, profile=learner_profile)))
             variants.append(("through sim_node", lambda name: train_steps_per_second(
-                client, policies, work, name, num_envs, steps)))
+                client, policies, work, name, num_envs, steps, profile=learner_profile)))
+            variants.append(("env floor", lambda name: steps_per_second(
+                batch.step, num_envs, max(1, steps // num_envs), rng)))
             if learner_node:
                 processes.append(NodeProcess(
                     "learner_node", logs, {"policy_dir": str(work / f"learner-{num_envs}"), "seed": 0,
-                                           "checkpoint_interval": 10_000_000},
+                                           "checkpoint_interval": 10_000_000, "learner_profile": profile},
                     env=env, extra_args=("-r", f"__ns:={namespace}")))
                 goals = LearnerNodeGoals(node, namespace)
                 waits.append(("learner_node's Train action", goals.ready))
@@ -204,12 +224,13 @@ def run_learner_bench(env_counts: Sequence[int], steps: int, rounds: int, learne
                         run.append(measure(f"bench-{name.split()[-1]}-{num_envs}-{round_index}"))
                         log(f"N={num_envs} round {round_index + 1}/{rounds}: {name} {run[-1]:.1f} steps/s")
                 medians = [statistics.median(run) for run in runs]
-                row = LearnerBenchRow(num_envs, medians[0], medians[1], medians[2] if learner_node else None,
-                                      workers, tuple(tuple(run) for run in runs))
+                row = LearnerBenchRow(num_envs, medians[0], medians[1], medians[3] if learner_node else None,
+                                      workers, tuple(tuple(run) for run in runs), env_floor=medians[2])
                 log(f"N={num_envs}: in-process {row.in_process:.1f} steps/s, through sim_node ({workers} workers) "
                     f"{row.through_ros:.1f}, ratio {row.ratio:.2f}"
                     + (f"; learner_node {row.learner_node:.1f}, ratio {row.learner_node_ratio:.2f}"
-                       if learner_node else ""))
+                       if learner_node else "")
+                    + f"; env floor {row.env_floor:.1f}, graph / floor {row.floor_ratio:.2f}")
                 rows.append(row)
             finally:
                 batch.close()
@@ -244,15 +265,18 @@ def learner_bench_report(rows: Sequence[LearnerBenchRow], command: str, steps: i
         f"*in-process* and *via sim_node* run the Trainer in the bench process (envs in it, or a sim_node "
         f"process with its default workers over `sim/step`), timed at every step; *learner_node* sends the goal "
         f"to a learner_node process, timed by the stamps of its TrainingProgress (about 1 Hz). "
-        f"Median of {rounds} alternating rounds.",
+        f"*env floor*: the same envs in the bench process, random actions, no learner (`bench sim`'s "
+        f"in-process rate): no goal can beat it. Median of {rounds} alternating rounds.",
         "",
-        "| N envs | in-process | via sim_node (workers) | learner_node | ratio sim_node / in-process "
-        "| ratio learner_node / in-process |",
-        "| ---: | ---: | ---: | ---: | ---: | ---: |",
+        "| N envs | in-process | via sim_node (workers) | learner_node | env floor | ratio sim_node / in-process "
+        "| ratio learner_node / in-process | ratio graph / floor |",
+        "| ---: | ---: | ---: | ---: | ---: | ---: | ---: | ---: |",
     ]
     lines += [f"| {r.num_envs} | {r.in_process:.1f} | {r.through_ros:.1f} ({r.workers}) | {maybe(r.learner_node, 1)} "
-              f"| {r.ratio:.2f} | {maybe(r.learner_node_ratio, 2)} |" for r in rows]
-    names = ("in-process", "via sim_node", "learner_node")
+              f"| {maybe(r.env_floor, 1)} | {r.ratio:.2f} | {maybe(r.learner_node_ratio, 2)} "
+              f"| {maybe(r.floor_ratio, 2)} |" for r in rows]
+    lines += ["", "Graph: learner_node, or via sim_node where learner_node was not measured."]
+    names = ("in-process", "via sim_node", "env floor", "learner_node")
     lines += ["", "Every round, in order (env steps/s):", ""]
     for r in rows:
         runs = "; ".join(f"{name} " + ", ".join(f"{v:.1f}" for v in run) for name, run in zip(names, r.rounds))

@@ -1,13 +1,15 @@
 """``glocal-ros bench transfer``: how Train goals fine-tune the A0 prior on other objects.
 
-For each fine-tuning recipe (``learner_node.sac_settings.FINE_TUNING_RECIPES``),
-prior, task and seed, one seeded Train goal from the prior with the same
+For each learner profile (``learner_node.profiles``), fine-tuning recipe
+(``learner_node.sac_settings.FINE_TUNING_RECIPES``, or ``default``: the
+profile's own; a profile refuses recipes it does not allow), prior, task and
+seed, one seeded Train goal from the prior with the same
 step budget, scored every ``eval_interval`` training steps on
 ``eval_episodes`` deterministic episodes (the paper's score), and never
 stopped when learned, so that the whole curve is seen. Per goal it records:
 
-- the curve: the score at step 0 (the prior, on the episodes the goal's own
-  step-0 evaluation would use) and at every interval;
+- the curve: the score at step 0 (the prior as the goal starts it, on the
+  episodes the goal's own step-0 evaluation would use) and at every interval;
 - steps-to-B: the first step whose score passes B (``passes_threshold``),
   none when no evaluation did;
 - the drop: how far the lowest score from ``COLLAPSE_AFTER`` steps on fell
@@ -18,8 +20,8 @@ stopped when learned, so that the whole curve is seen. Per goal it records:
 The priors are stored policies: the shipped ``prior`` by default, and for
 comparing networks (``learner_node.sac_settings.NETWORKS``) others that
 ``glocal-ros train-prior --network ... --name ... --out DIR`` made, read from
-``prior_store`` DIR before the shipped store. Each (recipe, prior) pair is
-an arm. Goals with the same task and seed run the same episodes in every
+``prior_store`` DIR before the profile's shipped store. Each (profile,
+recipe, prior) is an arm. Goals with the same task and seed run the same episodes in every
 arm (the goal's seed derives every stream, ``learner_node.training``), so
 the arms are compared pairwise on equal footing. The goals run in-process
 (the ``Trainer`` on a ``BatchedEnvs``, no ROS), ``jobs`` at a time in worker
@@ -55,13 +57,15 @@ from pathlib import Path
 from typing import Callable, Sequence
 
 from glocal_ros.curriculum.learner import passes_threshold
-from glocal_ros.paths import assets_dir
+from learner_node.profiles import DEFAULT_PROFILE, learner_profile
 from glocal_ros.seeds import MAX_SEED
 from glocal_ros.tasks import validate_tasks
 
 #: Eight cells over the grid: every row letter and every column digit at least once.
 TRANSFER_TASKS = ("A6", "B1", "C4", "D3", "E0", "E5", "F2", "G6")
 INITIAL_POLICY = "prior"
+#: The recipe name that stands for a learner profile's own fine-tuning (``LearnerProfile.fine_tuning``).
+PROFILE_RECIPE = "default"
 #: A collapse: from this many training steps on, a score this many points of 100 below the start.
 COLLAPSE_AFTER = 1_000
 COLLAPSE_POINTS = 25.0
@@ -103,10 +107,11 @@ class TransferGoal:
     threshold: float
     wall_s: float
     prior: str = INITIAL_POLICY
+    profile: str = DEFAULT_PROFILE
 
     @property
-    def arm(self) -> tuple[str, str]:
-        return self.recipe, self.prior
+    def arm(self) -> tuple[str, str, str]:
+        return self.profile, self.recipe, self.prior
 
     @property
     def start(self) -> int:
@@ -131,21 +136,26 @@ class TransferGoal:
         return self.drop_points >= COLLAPSE_POINTS
 
 
-def prior_stores(prior_store: Path | None) -> list:
-    """The read-only stores the priors come from: ``prior_store`` (when given), then the shipped one."""
+def prior_stores(prior_store: Path | None, profile: str = DEFAULT_PROFILE) -> list:
+    """The read-only stores the priors come from: ``prior_store`` (when given), then the profile's shipped one."""
     from learner_node.policy_store import PolicyStore
 
-    return [PolicyStore(root) for root in ([prior_store] if prior_store else []) + [assets_dir() / "priors"]]
+    return [PolicyStore(root) for root in ([prior_store] if prior_store else [])
+            + [learner_profile(profile).shipped_priors()]]
+
+
+def fine_tuning_of(profile: str, recipe: str):
+    """The fine-tuning of arm (``profile``, ``recipe``); ``ValueError`` where the profile does not allow it."""
+    return learner_profile(profile).with_recipe("" if recipe == PROFILE_RECIPE else recipe)
 
 
 def run_goal(recipe: str, prior: str, task: str, seed: int, settings: TransferSettings,
-             prior_store: Path | None = None) -> TransferGoal:
+             prior_store: Path | None = None, profile: str = DEFAULT_PROFILE) -> TransferGoal:
     """One seeded goal from ``prior`` in this process, on envs of its own; its curve and wall-clock."""
     from glocal_ros.seeds import derived_seed
     from learner_node.evaluation import evaluate
     from learner_node.policies import PolicyRegistry
     from learner_node.policy_store import PolicyStore
-    from learner_node.sac_settings import fine_tuning_recipe
     from learner_node.training import EVALUATION_STREAM, Trainer, TrainSpec
     from sim_node.batch import BatchedEnvs
     from sim_node.grasp_env import GraspEnv
@@ -153,38 +163,39 @@ def run_goal(recipe: str, prior: str, task: str, seed: int, settings: TransferSe
     work = Path(tempfile.mkdtemp(prefix="glocal-bench-transfer-"))
     envs = BatchedEnvs(lambda i: GraspEnv(task), settings.num_envs, task)
     try:
-        policies = PolicyRegistry(PolicyStore(work / "policies"), prior_stores(prior_store), seed=seed)
+        policies = PolicyRegistry(PolicyStore(work / "policies"), prior_stores(prior_store, profile), seed=seed)
         started = time.perf_counter()
-        # The episodes the goal's own step-0 evaluation would score (Trainer._evaluate_task's seed).
-        (start,) = evaluate(envs, policies.load(prior), [task], settings.eval_episodes,
+        trainer = Trainer(envs, policies, work / "checkpoints", seed, checkpoint_interval=10**12,
+                          profile=learner_profile(profile), fine_tuning=fine_tuning_of(profile, recipe))
+        # The prior as the goal starts it, on the episodes the goal's own step-0 evaluation would score.
+        (start,) = evaluate(envs, trainer.evaluation_policy(prior, [task]), [task], settings.eval_episodes,
                             seed=derived_seed(seed, EVALUATION_STREAM, 0))
         curve = [(0, start.successes)]
-        trainer = Trainer(envs, policies, work / "checkpoints", seed, checkpoint_interval=10**12,
-                          fine_tuning=fine_tuning_recipe(recipe))
         trainer.train(TrainSpec(task=task, initial_policy=prior, output_policy="transfer",
                                 step_budget=settings.step_budget, threshold=settings.threshold,
                                 eval_episodes=settings.eval_episodes, eval_interval=settings.eval_interval,
                                 seed=seed),
                       on_evaluation=lambda score, steps: curve.append((steps, score.successes)))
         return TransferGoal(recipe, task, seed, tuple(curve), settings.eval_episodes, settings.threshold,
-                            time.perf_counter() - started, prior)
+                            time.perf_counter() - started, prior, profile)
     finally:
         envs.close()
         shutil.rmtree(work, ignore_errors=True)
 
 
-def _run_goal(job: tuple[str, str, str, int, TransferSettings, Path | None]) -> TransferGoal:
+def _run_goal(job: tuple[str, str, str, int, TransferSettings, Path | None, str]) -> TransferGoal:
     return run_goal(*job)
 
 
 def run_transfer_bench(recipes: Sequence[str], tasks: Sequence[str], seeds: Sequence[int],
                        settings: TransferSettings, jobs: int = 1, log: Callable[[str], None] = print,
-                       priors: Sequence[str] = (INITIAL_POLICY,),
-                       prior_store: Path | None = None) -> list[TransferGoal]:
-    """Every (recipe, prior, task, seed) goal, ``jobs`` at a time; in the order task, seed, prior, recipe."""
-    _check(recipes, priors, prior_store, tasks, seeds, settings, jobs)
-    work = [(recipe, prior, task, seed, settings, prior_store)
-            for task in tasks for seed in seeds for prior in priors for recipe in recipes]
+                       priors: Sequence[str] = (INITIAL_POLICY,), prior_store: Path | None = None,
+                       profiles: Sequence[str] = (DEFAULT_PROFILE,)) -> list[TransferGoal]:
+    """Every (profile, recipe, prior, task, seed) goal, ``jobs`` at a time; in the order task, seed, profile,
+    prior, recipe."""
+    _check(recipes, priors, prior_store, tasks, seeds, settings, jobs, profiles)
+    work = [(recipe, prior, task, seed, settings, prior_store, profile)
+            for task in tasks for seed in seeds for profile in profiles for prior in priors for recipe in recipes]
     goals = []
     # Spawned workers: pybullet, torch and JAX do not survive a fork of a process that uses them.
     with ProcessPoolExecutor(max_workers=jobs, mp_context=get_context("spawn")) as pool:
@@ -195,31 +206,37 @@ def run_transfer_bench(recipes: Sequence[str], tasks: Sequence[str], seeds: Sequ
 
 
 def _check(recipes: Sequence[str], priors: Sequence[str], prior_store: Path | None, tasks: Sequence[str],
-           seeds: Sequence[int], settings: TransferSettings, jobs: int) -> None:
+           seeds: Sequence[int], settings: TransferSettings, jobs: int,
+           profiles: Sequence[str] = (DEFAULT_PROFILE,)) -> None:
     """Raise ``ValueError`` for anything that would fail later, before any goal runs."""
     from learner_node.policy_store import check_name
-    from learner_node.sac_settings import fine_tuning_recipe
 
-    for recipe in recipes:
-        fine_tuning_recipe(recipe)
+    for profile in profiles:
+        for recipe in recipes:
+            fine_tuning_of(profile, recipe)
     if prior_store is not None and not prior_store.is_dir():
         raise ValueError(f"the prior store {prior_store} is not a directory")
-    stores = prior_stores(prior_store)
-    for prior in priors:
-        if not any(check_name(prior) in store for store in stores):
-            raise ValueError(f"no prior {prior!r} in {' or '.join(str(store.root) for store in stores)}")
+    for profile in profiles:
+        stores = prior_stores(prior_store, profile)
+        for prior in priors:
+            store = next((store for store in stores if check_name(prior) in store), None)
+            if store is None:
+                raise ValueError(f"no prior {prior!r} in {' or '.join(str(store.root) for store in stores)}")
+            if store.record(prior).profile != profile:
+                raise ValueError(f"prior {prior!r} of {store.root} was trained under learner profile "
+                                 f"{store.record(prior).profile!r}, not {profile!r}")
     validate_tasks(list(tasks))
     settings.check()
-    if not recipes or not priors or not tasks or not seeds or jobs < 1:
-        raise ValueError("bench transfer needs a recipe, a prior, a task, a seed and at least one job")
-    if any(len(set(values)) != len(values) for values in (recipes, priors, tasks, seeds)):
-        raise ValueError("recipes, priors, tasks and seeds must not repeat")
+    if not recipes or not priors or not tasks or not seeds or not profiles or jobs < 1:
+        raise ValueError("bench transfer needs a profile, a recipe, a prior, a task, a seed and at least one job")
+    if any(len(set(values)) != len(values) for values in (recipes, priors, tasks, seeds, profiles)):
+        raise ValueError("profiles, recipes, priors, tasks and seeds must not repeat")
     if not all(0 <= seed <= MAX_SEED for seed in seeds):
         raise ValueError(f"seeds must lie in 0..{MAX_SEED}, got {list(seeds)}")
 
 
 def _goal_line(goal: TransferGoal) -> str:
-    return (f"{goal.recipe} from {goal.prior} {goal.task} seed {goal.seed}: "
+    return (f"{goal.profile} {goal.recipe} from {goal.prior} {goal.task} seed {goal.seed}: "
             + " ".join(f"{s}:{score}" for s, score in goal.curve)
             + f" (steps to B {goal.steps_to_b if goal.steps_to_b is not None else '-'}, "
             f"drop {goal.drop_points:.0f} points, {goal.wall_s:.0f} s)")
@@ -227,8 +244,8 @@ def _goal_line(goal: TransferGoal) -> str:
 
 def run_transfer_graph(recipes: Sequence[str], tasks: Sequence[str], seeds: Sequence[int],
                        settings: TransferSettings, log: Callable[[str], None] = print,
-                       priors: Sequence[str] = (INITIAL_POLICY,),
-                       prior_store: Path | None = None) -> list[TransferGoal]:
+                       priors: Sequence[str] = (INITIAL_POLICY,), prior_store: Path | None = None,
+                       profiles: Sequence[str] = (DEFAULT_PROFILE,)) -> list[TransferGoal]:
     """The goals of ``run_transfer_bench`` through sim_node + learner_node processes, one pair per arm."""
     import threading
     from contextlib import ExitStack
@@ -245,23 +262,24 @@ def run_transfer_graph(recipes: Sequence[str], tasks: Sequence[str], seeds: Sequ
     from learner_node.training import EVALUATION_STREAM
     from node_common import names, qos
 
-    _check(recipes, priors, prior_store, tasks, seeds, settings, 1)
+    _check(recipes, priors, prior_store, tasks, seeds, settings, 1, profiles)
     domain_id, lock = reserve_domain_id()
     work = Path(tempfile.mkdtemp(prefix="glocal-bench-transfer-graph-"))
     env = isolated_environment(domain_id, work / "logs")
     timeout = 600.0
     stack = ExitStack()
 
-    def pair(index: int, recipe: str, prior: str) -> Callable[[], list[TransferGoal]]:
+    def pair(index: int, profile: str, recipe: str, prior: str) -> Callable[[], list[TransferGoal]]:
         namespace = f"/transfer{index}"
         remap = ("-r", f"__ns:={namespace}")
         policy_dir = work / f"policies{index}"
-        source = next(store for store in prior_stores(prior_store) if prior in store)
+        source = next(store for store in prior_stores(prior_store, profile) if prior in store)
         PolicyStore(policy_dir).add_copy(source, prior, prior)
         processes = [NodeProcess("sim_node", work / "logs", {"num_envs": settings.num_envs, "initial_task": tasks[0]},
                                  env=env, extra_args=remap),
                      NodeProcess("learner_node", work / "logs",
-                                 {"policy_dir": str(policy_dir), "fine_tuning": recipe, "seed": 0,
+                                 {"policy_dir": str(policy_dir), "learner_profile": profile,
+                                  "fine_tuning": "" if recipe == PROFILE_RECIPE else recipe, "seed": 0,
                                   "checkpoint_interval": 10_000_000}, env=env, extra_args=remap)]
         stack.callback(lambda: [process.stop() for process in reversed(processes)])
         node = stack.enter_context(multithreaded_node(f"bench_transfer{index}", domain_id, namespace=namespace))
@@ -299,7 +317,7 @@ def run_transfer_graph(recipes: Sequence[str], tasks: Sequence[str], seeds: Sequ
                         curve = [(0, int(start))] + [((k + 1) * settings.eval_interval, score)
                                                      for k, score in enumerate(scores[output][:expected])]
                     goal = TransferGoal(recipe, task, seed, tuple(curve), settings.eval_episodes,
-                                        settings.threshold, wall_s, prior)
+                                        settings.threshold, wall_s, prior, profile)
                     log(_goal_line(goal))
                     done.append(goal)
             return done
@@ -307,8 +325,8 @@ def run_transfer_graph(recipes: Sequence[str], tasks: Sequence[str], seeds: Sequ
         return goals
 
     try:
-        arms = [(recipe, prior) for prior in priors for recipe in recipes]
-        runs = [pair(index, recipe, prior) for index, (recipe, prior) in enumerate(arms)]
+        arms = [(profile, recipe, prior) for profile in profiles for prior in priors for recipe in recipes]
+        runs = [pair(index, *arm) for index, arm in enumerate(arms)]
         with ThreadPoolExecutor(len(runs)) as pool:
             per_arm = list(pool.map(lambda run: run(), runs))
     finally:
@@ -323,13 +341,14 @@ def read_transfer_goals(path: Path, settings: TransferSettings) -> list[Transfer
 
     ``ValueError`` naming the file when it has no such table or its goals were
     scored at other steps than ``settings`` scores at; reports made before
-    arms had priors (no prior column) are read as from ``INITIAL_POLICY``.
+    arms had priors (no prior column) are read as from ``INITIAL_POLICY``, and before profiles (no
+    profile column) as of ``DEFAULT_PROFILE``.
     """
     expected = [str(steps) for steps in range(0, settings.step_budget + 1, settings.eval_interval)]
     goals, columns = [], None
     for line in Path(path).read_text().splitlines():
         cells = [cell.strip() for cell in line.strip().strip("|").split("|")]
-        if cells[:1] == ["recipe"] and "task" in cells:
+        if "recipe" in cells and "task" in cells and "seed" in cells:
             columns = cells
             scored_at = columns[columns.index("seed") + 1:columns.index("steps to B")]
             if scored_at != expected:
@@ -341,7 +360,8 @@ def read_transfer_goals(path: Path, settings: TransferSettings) -> list[Transfer
             goals.append(TransferGoal(
                 row["recipe"], row["task"], int(row["seed"]),
                 tuple((int(steps), int(row[steps])) for steps in expected),
-                settings.eval_episodes, settings.threshold, float(row["s"]), row.get("prior", INITIAL_POLICY)))
+                settings.eval_episodes, settings.threshold, float(row["s"]), row.get("prior", INITIAL_POLICY),
+                row.get("profile", DEFAULT_PROFILE)))
     if not goals:
         raise ValueError(f"{path}: no per-goal table of a bench transfer report in it")
     return goals
@@ -385,16 +405,16 @@ def transfer_bench_report(goals: Sequence[TransferGoal], command: str, settings:
         f"points of 100 below the start from step {COLLAPSE_AFTER} on. Wall-clock per goal includes its "
         f"evaluations.",
         "",
-        "| recipe | prior | goals | passed B | median steps to B | started below B | of those passed "
+        "| profile | recipe | prior | goals | passed B | median steps to B | started below B | of those passed "
         "| their median steps to B | collapses | median drop (points) | median final score "
         "| median wall-clock per goal (s) |",
-        "| --- | --- | ---: | ---: | ---: | ---: | ---: | ---: | ---: | ---: | ---: | ---: |",
+        "| --- | --- | --- | ---: | ---: | ---: | ---: | ---: | ---: | ---: | ---: | ---: | ---: |",
     ]
-    for recipe, prior in arms:
-        mine = [g for g in goals if g.arm == (recipe, prior)]
+    for profile, recipe, prior in arms:
+        mine = [g for g in goals if g.arm == (profile, recipe, prior)]
         below = [g for g in mine if g.steps_to_b != 0]
         lines.append(
-            f"| {recipe} | {prior} | {len(mine)} | {sum(g.steps_to_b is not None for g in mine)} "
+            f"| {profile} | {recipe} | {prior} | {len(mine)} | {sum(g.steps_to_b is not None for g in mine)} "
             f"| {_steps(median_steps_to_b(mine))} | {len(below)} | {sum(g.steps_to_b is not None for g in below)} "
             f"| {_steps(median_steps_to_b(below)) if below else '-'} | {sum(g.collapsed for g in mine)} "
             f"| {statistics.median(g.drop_points for g in mine):.0f} "
@@ -402,10 +422,11 @@ def transfer_bench_report(goals: Sequence[TransferGoal], command: str, settings:
             f"| {statistics.median(g.wall_s for g in mine):.0f} |")
     steps = [s for s, _ in goals[0].curve] if goals else []
     lines += ["", "Every goal (scores out of " f"{settings.eval_episodes} at each step):", "",
-              "| recipe | prior | task | seed | " + " | ".join(str(s) for s in steps) + " | steps to B | drop | s |",
-              "| --- | --- | --- | ---: | " + " | ".join("---:" for _ in steps) + " | ---: | ---: | ---: |"]
+              "| profile | recipe | prior | task | seed | " + " | ".join(str(s) for s in steps)
+              + " | steps to B | drop | s |",
+              "| --- | --- | --- | --- | ---: | " + " | ".join("---:" for _ in steps) + " | ---: | ---: | ---: |"]
     for g in goals:
-        lines.append(f"| {g.recipe} | {g.prior} | {g.task} | {g.seed} | "
+        lines.append(f"| {g.profile} | {g.recipe} | {g.prior} | {g.task} | {g.seed} | "
                      + " | ".join(str(score) for _, score in g.curve)
                      + f" | {'-' if g.steps_to_b is None else g.steps_to_b} | {g.drop_points:.0f} "
                      f"| {g.wall_s:.0f} |")

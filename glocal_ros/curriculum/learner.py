@@ -5,6 +5,16 @@ from __future__ import annotations
 from dataclasses import dataclass
 from typing import Protocol, Sequence
 
+#: S-bar: evaluation episodes of a score, the paper's 100.
+PAPER_EVAL_EPISODES = 100
+#: B as a share of S-bar: the paper's 75 of 100.
+PAPER_THRESHOLD_FRACTION = 0.75
+
+
+def paper_threshold(eval_episodes: int = PAPER_EVAL_EPISODES) -> float:
+    """B for a score out of ``eval_episodes``: the paper's share of S-bar."""
+    return PAPER_THRESHOLD_FRACTION * eval_episodes
+
 
 @dataclass(frozen=True)
 class TrainRequest:

@@ -30,7 +30,8 @@ from glocal_ros.curriculum.codes import (
     ROLE_CLUSTER, ROLE_GLOBAL, ROLE_LOCAL, ROLE_SAMPLED, STATUS_EVALUATING, STATUS_FINISHED, STATUS_STARTING,
     STATUS_TRAINING, STATUS_TRAINING_GLOBAL, STATUS_TRAINING_LOCAL, BASELINE_TASKS,
 )
-from glocal_ros.curriculum.learner import Learner, TrainRequest, TrainResult
+from glocal_ros.curriculum.learner import (PAPER_EVAL_EPISODES, Learner, TrainRequest, TrainResult,
+                                           paper_threshold)
 from glocal_ros.tasks import sorted_tasks, validate_tasks
 
 _STATUS_OF_ROLE = {ROLE_GLOBAL: STATUS_TRAINING_GLOBAL, ROLE_LOCAL: STATUS_TRAINING_LOCAL,
@@ -47,8 +48,8 @@ class RunConfig:
     seed: int = 0
     step_budget: int = 4_000_000  # training env steps, all tasks (the paper compares at 4M)
     task_step_budget: int = 200_000  # the paper's "maximum amount of training time" per task
-    eval_episodes: int = 100  # S-bar
-    threshold: float = 75.0  # B
+    eval_episodes: int = PAPER_EVAL_EPISODES  # S-bar
+    threshold: float = paper_threshold()  # B
     eval_interval: int = 10_000  # env steps between checks of "score > B" while a task trains
     k_min: int = 2
     k_max: int = 6

@@ -7,6 +7,7 @@ from typing import Callable
 from glocal_ros.curriculum.baselines import run_alp_gmm, run_random
 from glocal_ros.curriculum.glocal import run_glocal
 from glocal_ros.curriculum.run import Run
+from glocal_ros.sim_contract import DEFAULT_EPISODE_STEPS
 
 #: name -> ``strategy(run, max_episode_steps)``.
 STRATEGIES: dict[str, Callable[[Run, int], None]] = {
@@ -19,7 +20,7 @@ STRATEGIES: dict[str, Callable[[Run, int], None]] = {
 }
 
 
-def run_strategy(run: Run, max_episode_steps: int = 50) -> None:
+def run_strategy(run: Run, max_episode_steps: int = DEFAULT_EPISODE_STEPS) -> None:
     """Run ``run.config.strategy`` to its end; ``max_episode_steps`` is the envs' T."""
     if run.config.strategy not in STRATEGIES:
         raise ValueError(f"unknown strategy {run.config.strategy!r}: expected one of {', '.join(STRATEGIES)}")
