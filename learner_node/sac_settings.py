@@ -76,7 +76,33 @@ def load_model(path, **kwargs):
     if not made_by.startswith("sbx."):
         raise ValueError(f"{path} holds a SAC model of {made_by.split('.')[0]!r} ({made_by}); this learner "
                          "runs SBX (sbx-rl): train the policy again with it (a prior: glocal-ros train-prior)")
-    return sac_algorithm().load(path, device="cpu", **kwargs)
+    model = sac_algorithm().load(path, device="cpu", **kwargs)
+    share_compiled_code(model)
+    return model
+
+
+#: (train state, its network, the optimiser's settings) -> (apply_fn, tx) of the first model loaded with them.
+_SHARED_STATICS: dict[tuple, tuple] = {}
+
+
+def share_compiled_code(model) -> None:
+    """Give ``model``'s train states the apply functions and optimisers of the first model loaded with the same
+    network and optimiser settings, so that it runs the code JAX compiled for that one.
+
+    JAX caches compiled code by the static part of the arguments' pytrees, and a flax TrainState's static
+    part is its ``apply_fn`` (a bound method of the network's Module) and ``tx`` (optax closures): every
+    loaded model has new ones, so every Train goal from a stored policy compiled SBX's action and update
+    functions again, about 20 s of a 40-step goal on a loaded 2-core machine. Models whose Modules and
+    optimiser settings are equal compute the same functions with either.
+    """
+    policy = model.policy
+    settings = (repr(policy.optimizer_class), repr(sorted(policy.optimizer_kwargs.items())),
+                float(model.lr_schedule(1)), model.initial_qf_learning_rate)
+    for owner, name in ((policy, "actor_state"), (policy, "qf_state"), (model, "ent_coef_state")):
+        state = getattr(owner, name)
+        key = (name, repr(state.apply_fn.__self__), settings)
+        apply_fn, tx = _SHARED_STATICS.setdefault(key, (state.apply_fn, state.tx))
+        setattr(owner, name, state.replace(apply_fn=apply_fn, tx=tx))
 
 
 def saved_policy_module(path) -> str:

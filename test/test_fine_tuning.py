@@ -105,3 +105,22 @@ def test_acting_with_a_stored_policy_computes_on_the_learners_threads(monkeypatc
     # The user's flags are kept.
     assert os.environ["XLA_FLAGS"] == f"--xla_cpu_enable_fast_math=false {XLA_ONE_THREAD_FLAGS}"
     assert torch.get_num_threads() == COMPUTE_THREADS
+
+
+def test_a_policy_loaded_again_runs_the_code_jax_compiled_for_the_first(tmp_path):
+    """Each loaded model's train states get the apply functions and optimisers of the first model of its
+    settings: a goal from a stored policy no longer compiles SBX's functions again (about 20 s a goal)."""
+    from sbx.common.policies import BaseJaxPolicy
+
+    store = PolicyStore(tmp_path / "store")
+    store.add_copy(PolicyStore(assets_dir() / "priors"), "prior", "copy")
+    first, second = PolicyStore(assets_dir() / "priors").load("prior"), store.load("copy")
+    for name in ("actor_state", "qf_state"):
+        a, b = getattr(first.policy, name), getattr(second.policy, name)
+        assert a.apply_fn is b.apply_fn and a.tx is b.tx, name
+    assert first.ent_coef_state.tx is second.ent_coef_state.tx
+    observations = np.zeros((2, 63), dtype=np.float32)
+    first.predict(observations, deterministic=True)
+    compiled = BaseJaxPolicy.select_action._cache_size()
+    second.predict(observations, deterministic=True)
+    assert BaseJaxPolicy.select_action._cache_size() == compiled
