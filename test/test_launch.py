@@ -40,32 +40,6 @@ def read(bag, topic):
         return [reader.deserialize(raw, c.msgtype) for c, _, raw in reader.messages() if c.topic == topic]
 
 
-def test_smoke_launch_records_the_run_and_reports_it(tmp_path):
-    run_dir = tmp_path / "run"
-    result = launch(run_dir, "--seed", "1")
-    assert result.returncode == 0, result.stdout + result.stderr
-    assert "global task" in result.stdout and f"report: {run_dir / 'report' / 'report.md'}" in result.stdout
-    assert "(a free one; set ROS_DOMAIN_ID to choose)" in result.stdout
-
-    states = read(run_dir / "bag", "/glocal/curriculum_state")
-    assert states[-1].status == 5 and states[-1].run_id == "glocal-seed1"
-    check = episode_sequence(run_dir / "bag")
-    assert check.ok and check.first == 0 and check.count > 0, check.summary()
-    evaluated = {e.task for e in read(run_dir / "bag", "/glocal/episodes") if e.phase == 1 and not e.interrupted}
-    assert evaluated == set(smoke_tasks())
-    report = (run_dir / "report" / "report.md").read_text()
-    assert "glocal" in report and (run_dir / "report" / "learned_vs_steps.png").stat().st_size > 1000
-
-    # The same command again: the run is finished; it is replayed from the journal, not trained again.
-    again = launch(run_dir, "--seed", "1")
-    assert again.returncode == 0, again.stdout + again.stderr
-    assert (run_dir / "bag.1" / "metadata.yaml").is_file()
-    assert not read(run_dir / "bag.1", "/glocal/task_assignment"), "no goal was sent again"
-
-    refused = launch(run_dir, "--seed", "2")
-    assert refused.returncode == 2 and "holds the run" in refused.stderr
-
-
 def sim_stamps(bag) -> dict[str, list[int]]:
     """The stamps sim_node gave its messages (header stamps; /clock's value), per topic, in order."""
     def nanoseconds(stamp) -> int:
@@ -79,27 +53,64 @@ def sim_stamps(bag) -> dict[str, list[int]]:
     }
 
 
-def test_the_same_seed_repeats_the_run_answer_for_answer(tmp_path):
-    """Seeded sim episodes, learner and curriculum: two runs' journals (every score, every episode) agree;
-    on sim time, so do the stamps of everything the sim sent."""
-    journals, stamps = [], []
-    for name in ("first", "second"):
-        result = launch(tmp_path / name, "--seed", "5", "--use-sim-time")
-        assert result.returncode == 0, result.stdout + result.stderr
-        journals.append((tmp_path / name / "curriculum" / "journal.jsonl").read_text())
-        stamps.append(sim_stamps(tmp_path / name / "bag"))
+def test_runs_are_recorded_reported_repeated_and_replayed(tmp_path):
+    """One experiment (random and glocal, seed 5, on sim time), then one launch of its glocal run again.
+
+    - The experiment records each run and one report; the same command again skips both, finished.
+    - A run's bag holds the curriculum to its end, every episode in sequence and evaluations of every
+      task; the launch prints and writes its report.
+    - The same seed repeats the run answer for answer: the journals (every score, every episode) of the
+      experiment's run and the launch agree, and on sim time so do the stamps of what the sim sent.
+    - The same launch again replays the finished run from its journal (no goal is sent); another seed
+      in its directory is refused.
+    """
+    out = tmp_path / "experiment"
+    command = [*CLI, "experiment", "--strategies", "random,glocal", "--seeds", "5", "--preset", "smoke",
+               "--use-sim-time", "--out", str(out)]
+    result = subprocess.run(command, capture_output=True, text=True, timeout=900, cwd=REPO, env=graph_env())
+    assert result.returncode == 0, result.stdout + result.stderr
+    for run in ("random-seed5", "glocal-seed5"):
+        assert (out / run / "bag" / "metadata.yaml").is_file()
+    report = (out / "report" / "report.md").read_text()
+    assert "random" in report and "glocal" in report
+
+    first = out / "glocal-seed5"
+    states = read(first / "bag", "/glocal/curriculum_state")
+    assert states[-1].status == 5 and states[-1].run_id == "glocal-seed5"
+    check = episode_sequence(first / "bag")
+    assert check.ok and check.first == 0 and check.count > 0, check.summary()
+    evaluated = {e.task for e in read(first / "bag", "/glocal/episodes") if e.phase == 1 and not e.interrupted}
+    assert evaluated == set(smoke_tasks())
+
+    second = tmp_path / "second"
+    result = launch(second, "--seed", "5", "--use-sim-time")
+    assert result.returncode == 0, result.stdout + result.stderr
+    assert "global task" in result.stdout and f"report: {second / 'report' / 'report.md'}" in result.stdout
+    assert "(a free one; set ROS_DOMAIN_ID to choose)" in result.stdout
+    assert (second / "report" / "learned_vs_steps.png").stat().st_size > 1000
+    journals = [(run / "curriculum" / "journal.jsonl").read_text() for run in (first, second)]
     assert journals[0].count('"call": "train"') > 0
     assert journals[0] == journals[1]
-    first, second = stamps
-    assert all(first.values()) and first["/clock"][-1] > 0
+    stamps = [sim_stamps(run / "bag") for run in (first, second)]
+    assert all(stamps[0].values()) and stamps[0]["/clock"][-1] > 0
     for topic in ("/clock", "/glocal/episodes"):  # reliable with deep queues: every message is in the bag
-        assert first[topic] == second[topic], topic
+        assert stamps[0][topic] == stamps[1][topic], topic
     # Throttled viewer streams keep a queue of 10: a recorder that falls behind on a loaded machine
     # may miss one. What both bags hold must be the same instants, on the sim clock.
     for topic in ("/joint_states", "/tf"):
-        common = set(first[topic]) & set(second[topic])
-        assert len(common) >= 0.95 * max(len(first[topic]), len(second[topic])), topic
-        assert set(first[topic]) <= set(first["/clock"]), topic
+        common = set(stamps[0][topic]) & set(stamps[1][topic])
+        assert len(common) >= 0.95 * max(len(stamps[0][topic]), len(stamps[1][topic])), topic
+        assert set(stamps[0][topic]) <= set(stamps[0]["/clock"]), topic
+
+    again = launch(second, "--seed", "5", "--use-sim-time")
+    assert again.returncode == 0, again.stdout + again.stderr
+    assert (second / "bag.1" / "metadata.yaml").is_file()
+    assert not read(second / "bag.1", "/glocal/task_assignment"), "no goal was sent again"
+    refused = launch(second, "--seed", "2")
+    assert refused.returncode == 2 and "holds the run" in refused.stderr
+
+    again = subprocess.run(command, capture_output=True, text=True, timeout=120, cwd=REPO, env=graph_env())
+    assert again.returncode == 0 and again.stdout.count("finished before") == 2, again.stdout
 
 
 def test_ctrl_c_leaves_a_valid_bag_and_the_same_command_resumes(tmp_path):
@@ -128,21 +139,6 @@ def test_ctrl_c_leaves_a_valid_bag_and_the_same_command_resumes(tmp_path):
     final = read(run_dir / "bag.1", "/glocal/curriculum_state")[-1]
     assert final.status == 5 and final.total_steps >= interrupted.total_steps
     assert (run_dir / "report" / "report.md").is_file()
-
-
-def test_experiment_runs_each_strategy_and_seed_then_reports(tmp_path):
-    out = tmp_path / "experiment"
-    command = [*CLI, "experiment", "--strategies", "random,glocal", "--seeds", "0", "--preset", "smoke",
-               "--out", str(out)]
-    result = subprocess.run(command, capture_output=True, text=True, timeout=600, cwd=REPO, env=graph_env())
-    assert result.returncode == 0, result.stdout + result.stderr
-    for run in ("random-seed0", "glocal-seed0"):
-        assert (out / run / "bag" / "metadata.yaml").is_file()
-    report = (out / "report" / "report.md").read_text()
-    assert "random" in report and "glocal" in report
-
-    again = subprocess.run(command, capture_output=True, text=True, timeout=120, cwd=REPO, env=graph_env())
-    assert again.returncode == 0 and again.stdout.count("finished before") == 2, again.stdout
 
 
 def test_a_hung_learner_is_reported_the_graph_stopped_and_the_run_resumes(tmp_path):
