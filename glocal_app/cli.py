@@ -17,7 +17,7 @@ from glocal_app.benches.curriculum import BENCH_PRESET, DEFAULT_OUT, DEFAULT_RES
 from glocal_app.benches.transfer import INITIAL_POLICY, PROFILE_RECIPE, TRANSFER_TASKS, TransferSettings
 from glocal_app.nodes import NODES
 from glocal_ros.curriculum.codes import STRATEGY_NAMES
-from glocal_ros.curriculum.learner import passes_threshold
+from glocal_ros.curriculum.learner import paper_threshold, passes_threshold
 from glocal_ros.paths import assets_dir, objects_dir
 from glocal_ros.tasks import parse_task_list, sorted_tasks
 from learner_node.prior import PriorConfig
@@ -375,7 +375,8 @@ def cmd_train_prior(args: argparse.Namespace) -> int:
                                  "seed": config.seed, "network": config.network or profile.network})
     PolicyStore(args.out).save(model, record, recent_experience(model.replay_buffer, EXPERIENCE_TRANSITIONS))
     print(f"stored in {args.out}/{args.name}")
-    return 0 if passes_threshold(score.successes, args.threshold) else 1
+    threshold = paper_threshold(score.episodes) if args.threshold is None else args.threshold
+    return 0 if passes_threshold(score.successes, threshold) else 1
 
 
 def cmd_collect_experience(args: argparse.Namespace) -> int:
@@ -551,13 +552,15 @@ def build_parser() -> argparse.ArgumentParser:
     add_profile_argument(bench_curriculum, default=None)
     bench_curriculum.set_defaults(func=cmd_bench_curriculum)
 
-    prior = commands.add_parser("train-prior", help="train the A0 prior (resumable) and store it in assets/priors")
+    prior = commands.add_parser("train-prior", help="train a learner profile's A0 prior (resumable) and store it "
+                                "with the profile's shipped priors")
     prior.add_argument("--steps", type=int, default=PriorConfig.max_steps, help="most SAC env steps")
     prior.add_argument("--min-steps", type=int, default=PriorConfig.min_steps,
                        help="SAC env steps before the training success rate may stop it")
     prior.add_argument("--seed", type=int, default=0)
     prior.add_argument("--eval-episodes", type=int, default=100)
-    prior.add_argument("--threshold", type=float, default=75, help="B: the prior must score above it")
+    prior.add_argument("--threshold", type=float, default=None,
+                       help="B: the prior must score above it (default: 0.75 x --eval-episodes, the paper's)")
     prior.add_argument("--work-dir", type=Path, default=None,
                        help="checkpoints, for resuming (default: build/prior-PROFILE)")
     prior.add_argument("--out", type=Path, default=None,
