@@ -18,6 +18,7 @@ from __future__ import annotations
 
 import json
 import threading
+import time
 import traceback
 from dataclasses import MISSING, asdict, fields
 from pathlib import Path
@@ -38,6 +39,9 @@ from curriculum_node.ros_learner import LearnerStopped, RosLearner
 from node_common import names, qos
 from node_common.params import declare
 from node_common.runner import spin_node
+
+#: The most a stopping node waits for its subscribers to have its latest state and assignment.
+DRAIN_SEC = 10.0
 
 _DEFAULTS = {f.name: f.default for f in fields(RunConfig) if f.default is not MISSING}
 
@@ -123,10 +127,20 @@ class CurriculumNode(Node):
     def finish(self) -> None:
         """End the node once subscribers (the recorder) have acknowledged the last state."""
         if self.context.ok():
-            for publisher in (self.state_pub, self.assignment_pub):
-                publisher.wait_for_all_acked(Duration(seconds=5.0))
+            self.drain()
         # Shutting the context down ends the executor's spin, and so main().
         self.context.try_shutdown()
+
+    def drain(self) -> None:
+        """Deliver the latest state and assignment to every subscriber the graph lists (at most
+        ``DRAIN_SEC``), on Ctrl-C as at the end: a recorder that has not matched this node's
+        publishers yet (a loaded machine) would otherwise close its bag without them."""
+        deadline = time.monotonic() + DRAIN_SEC
+        for publisher in (self.state_pub, self.assignment_pub):
+            while (publisher.get_subscription_count() < self.count_subscribers(publisher.topic_name)
+                   and time.monotonic() < deadline):
+                time.sleep(0.05)
+            publisher.wait_for_all_acked(Duration(seconds=max(0.0, deadline - time.monotonic())))
 
     # RunObserver: what the run reports, published. Replayed decisions were
     # published by the node that made them, so only live ones go out.

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import os
+import signal
 import threading
 from contextlib import contextmanager
 from pathlib import Path
@@ -48,12 +49,24 @@ def spin_node(make_node: Callable[[], Node], args: Sequence[str] | None = None, 
     callbacks block on other callbacks of theirs (a service that calls
     services); one thread is cheaper per callback.
 
+    A node with a ``drain()`` method gets to run it on SIGINT/SIGTERM while
+    its context is still up (rclpy's own handler would shut the context down
+    first, and with it every publisher): what it published last can still
+    reach its subscribers. Its signals then raise ``KeyboardInterrupt`` in
+    the spinning thread instead.
+
     Returns the process exit code: 1 when the node failed (the error is
     logged through the node's logger when it exists), else the node's own
     ``exit_code`` attribute if it has one (a node that ends itself), else 0.
     """
     configure_discovery()
-    rclpy.init(args=args, signal_handler_options=SignalHandlerOptions.ALL)
+    drains = callable(getattr(make_node, "drain", None))
+    if drains:
+        rclpy.init(args=args, signal_handler_options=SignalHandlerOptions.NO)
+        signal.signal(signal.SIGINT, signal.default_int_handler)
+        signal.signal(signal.SIGTERM, signal.default_int_handler)
+    else:
+        rclpy.init(args=args, signal_handler_options=SignalHandlerOptions.ALL)
     node: Node | None = None
     failed = False
     try:
@@ -65,7 +78,10 @@ def spin_node(make_node: Callable[[], Node], args: Sequence[str] | None = None, 
         # never notices SIGTERM (seen here about once in three shutdowns).
         while node.context.ok():
             executor.spin_once(timeout_sec=SHUTDOWN_POLL_SEC)
-    except (KeyboardInterrupt, ExternalShutdownException):
+    except KeyboardInterrupt:
+        if drains and node is not None and node.context.ok():
+            node.drain()
+    except ExternalShutdownException:
         pass
     except Exception as error:  # noqa: BLE001 - the process must report any failure and exit non-zero
         logger = node.get_logger() if node is not None else rclpy.logging.get_logger("glocal_ros")
