@@ -4,6 +4,15 @@ The arm is commanded in Cartesian space: a tool-centre-point (TCP) position, a
 yaw about the vertical axis and an open/closed gripper. The TCP is the
 ``panda_grasptarget`` frame, between the finger pads, about 1.1 cm above the
 fingertips. At yaw 0 the fingers close along the world y axis.
+
+The fingers are coupled, as the Franka hand's are (one motor and a rack; the
+URDF says ``panda_finger_joint2`` mimics ``panda_finger_joint1``): a gear
+constraint of ratio -1 between the two prismatic joints, as PyBullet's own
+Panda example makes it, holds them at the same travel while both motors
+drive them. A finger that touches the object first therefore pushes it
+towards the middle of the hand until the other finger closes on it, and
+what the sim reports matches what a URDF consumer that honours the mimic
+(robot_state_publisher) draws.
 """
 
 from __future__ import annotations
@@ -42,6 +51,10 @@ _ARM_FORCES = (87.0, 87.0, 87.0, 87.0, 12.0, 12.0, 12.0)
 # substeps the arm covers about 90% of a commanded move within the env step.
 _ARM_POSITION_GAIN = 0.2
 _FINGER_FORCE = 20.0
+# PyBullet's Panda example (pybullet_robots/panda/panda_sim.py) couples the fingers with these.
+_FINGER_GEAR_RATIO = -1.0
+_FINGER_GEAR_ERP = 0.1
+_FINGER_GEAR_MAX_FORCE = 50.0
 _LOWER_LIMITS = np.array((-2.9671, -1.8326, -2.9671, -3.1416, -2.9671, -0.0873, -2.9671))
 _UPPER_LIMITS = np.array((2.9671, 1.8326, 2.9671, 0.0, 2.9671, 3.8223, 2.9671))
 # The order of JOINT_NAMES.
@@ -94,6 +107,11 @@ class PandaRobot:
         ]
         base_inertial = client.getDynamicsInfo(self.body, -1)[3:5]
         self._base_link_from_inertial = client.invertTransform(*base_inertial)
+        gear = client.createConstraint(self.body, LEFT_FINGER_LINK, self.body, RIGHT_FINGER_LINK,
+                                       jointType=pybullet.JOINT_GEAR, jointAxis=(1, 0, 0),
+                                       parentFramePosition=(0, 0, 0), childFramePosition=(0, 0, 0))
+        client.changeConstraint(gear, gearRatio=_FINGER_GEAR_RATIO, erp=_FINGER_GEAR_ERP,
+                                maxForce=_FINGER_GEAR_MAX_FORCE)
         self.reset()
 
     def reset(self) -> None:
