@@ -12,7 +12,9 @@ import sys
 import tempfile
 import threading
 import time
+from contextlib import contextmanager
 from pathlib import Path
+from typing import Callable, Iterator
 
 import pytest
 
@@ -48,23 +50,25 @@ def pytest_sessionfinish(session, exitstatus):
     _DOMAIN_LOCK.close()
 
 
-@pytest.fixture
-def start_node(tmp_path):
-    """``start_node(name, **params)`` starts a node process; all are stopped after the test."""
+@contextmanager
+def node_starter(log_dir: Path) -> Iterator[Callable[..., NodeProcess]]:
+    """``start(name, **params)`` starts a node process; all are stopped when the block ends."""
     started: list[NodeProcess] = []
 
     def start(node: str, extra_args: tuple[str, ...] = (), **params) -> NodeProcess:
-        process = NodeProcess(node, tmp_path, params, extra_args=extra_args, cwd=REPO)
+        process = NodeProcess(node, log_dir, params, extra_args=extra_args, cwd=REPO)
         started.append(process)
         return process
 
-    yield start
-    for process in reversed(started):
-        process.stop()
+    try:
+        yield start
+    finally:
+        for process in reversed(started):
+            process.stop()
 
 
-@pytest.fixture
-def ros_node():
+@contextmanager
+def spun_test_node() -> Iterator:
     """An rclpy node of the test itself, spun by a background executor."""
     import rclpy
     from rclpy.executors import MultiThreadedExecutor
@@ -82,12 +86,28 @@ def ros_node():
 
     spinner = threading.Thread(target=spin, daemon=True)
     spinner.start()
-    yield node
-    stop.set()
-    spinner.join(5)
-    executor.shutdown()
-    node.destroy_node()
-    rclpy.shutdown(context=context)
+    try:
+        yield node
+    finally:
+        stop.set()
+        spinner.join(5)
+        executor.shutdown()
+        node.destroy_node()
+        rclpy.shutdown(context=context)
+
+
+@pytest.fixture
+def start_node(tmp_path):
+    """``start_node(name, **params)`` starts a node process; all are stopped after the test."""
+    with node_starter(tmp_path) as start:
+        yield start
+
+
+@pytest.fixture
+def ros_node():
+    """An rclpy node of the test itself, spun by a background executor."""
+    with spun_test_node() as node:
+        yield node
 
 
 def wait_until(predicate, timeout: float, what: str, poll: float = 0.05, processes=()):

@@ -1,17 +1,28 @@
-"""learner_node against a real sim_node: the Evaluate service and bad requests."""
+"""learner_node against a real sim_node: the Evaluate service and bad requests.
+
+One sim/learner pair serves the module's tests, as it serves a run: a test's
+bad request must leave it serving the next test's good ones.
+"""
 
 import pytest
 from glocal_interfaces.msg import EvaluationResult
 from glocal_interfaces.srv import CopyPolicy, Evaluate, ListPolicies
 
-from conftest import answers, wait_until
+from conftest import answers, node_starter, spun_test_node, wait_until
 from node_common import names, qos
 from node_common.calls import call
 
 
-@pytest.fixture
-def policy_dir(tmp_path):
+@pytest.fixture(scope="module")
+def ros_node():
+    with spun_test_node() as node:
+        yield node
+
+
+@pytest.fixture(scope="module")
+def policy_dir(tmp_path_factory):
     """A policy store holding one (untrained) SAC policy, 'untrained', and one stable-baselines3 (torch) made."""
+    tmp_path = tmp_path_factory.mktemp("learner")
     from stable_baselines3 import SAC
 
     from learner_node.policy_store import PolicyRecord, PolicyStore
@@ -27,14 +38,15 @@ def policy_dir(tmp_path):
     return tmp_path / "policies"
 
 
-@pytest.fixture
-def learner(start_node, ros_node, policy_dir):
-    sim = start_node("sim_node", num_envs=2, max_steps=10)
-    learner = start_node("learner_node", max_eval_episodes=50, policy_dir=str(policy_dir))
-    evaluate = ros_node.create_client(Evaluate, names.LEARNER_EVALUATE)
-    probe = Evaluate.Request(policy="random", tasks=["A0"], episodes=1)
-    wait_until(lambda: answers(evaluate, probe), 60, "an answer from learner/evaluate", processes=[sim, learner])
-    return learner, evaluate
+@pytest.fixture(scope="module")
+def learner(ros_node, policy_dir):
+    with node_starter(policy_dir.parent) as start_node:
+        sim = start_node("sim_node", num_envs=2, max_steps=10)
+        learner = start_node("learner_node", max_eval_episodes=50, policy_dir=str(policy_dir))
+        evaluate = ros_node.create_client(Evaluate, names.LEARNER_EVALUATE)
+        probe = Evaluate.Request(policy="random", tasks=["A0"], episodes=1)
+        wait_until(lambda: answers(evaluate, probe), 60, "an answer from learner/evaluate", processes=[sim, learner])
+        yield learner, evaluate
 
 
 def test_evaluate_scores_every_task(learner, ros_node):
