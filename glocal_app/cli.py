@@ -13,6 +13,7 @@ import sys
 from pathlib import Path
 
 from glocal_app.bag_cli import add_bag_commands
+from glocal_app.benches import cost as cost_bench
 from glocal_app.benches.curriculum import BENCH_PRESET, DEFAULT_OUT, DEFAULT_RESULTS
 from glocal_app.benches.transfer import INITIAL_POLICY, PROFILE_RECIPE, TRANSFER_TASKS, TransferSettings
 from glocal_app.nodes import NODES
@@ -150,17 +151,18 @@ def cmd_assets_generate(args: argparse.Namespace) -> int:
     measured = None if args.grid == "geometric" else MeasuredGrid(
         partial(grasp_trial, perturbed_episodes=args.perturbed_episodes), **shortlist)
     generate_object_set(args.out, seed=args.seed, candidates=args.candidates, workers=args.workers,
-                        progress=_progress, measured=measured)
+                        progress=_progress, measured=measured, lifting_poses=_lifting_pose_check(args))
     print(f"wrote {args.out}")
     return cmd_assets_check(args) if args.check_episodes else 0
 
 
 def cmd_assets_import_egad(args: argparse.Namespace) -> int:
-    from glocal_ros.objects import BadMeshError, MissingEgadFilesError, import_egad
+    from glocal_ros.objects import BadMeshError, MissingEgadFilesError, UnliftableObjectError, import_egad
 
     try:
-        import_egad(args.egad_dir, args.out, require_all=not args.partial, progress=_progress)
-    except (BadMeshError, MissingEgadFilesError) as error:
+        import_egad(args.egad_dir, args.out, require_all=not args.partial, progress=_progress,
+                    lifting_poses=_lifting_pose_check(args))
+    except (BadMeshError, MissingEgadFilesError, UnliftableObjectError) as error:
         print(f"assets import-egad: {error}; {args.out} is unchanged", file=sys.stderr)
         return 1
     print(f"wrote {args.out}")
@@ -184,6 +186,34 @@ def cmd_assets_check(args: argparse.Namespace) -> int:
     print(f"perturbed grasp: mean {sum(perturbed.values()) / len(perturbed):.0%}, lowest "
           f"{min(perturbed.values()):.0%}, highest {max(perturbed.values()):.0%}")
     return 1 if never else 0
+
+
+def _lifting_pose_check(args: argparse.Namespace):
+    """The asset commands' share of lifting poses, and their rule that every object stays learnable."""
+    from functools import partial
+
+    from glocal_ros.objects import LiftingPoseCheck
+    from sim_node.lifting_poses import LiftingPoseSettings, lifting_pose_trial
+
+    settings = LiftingPoseSettings()
+    return LiftingPoseCheck(partial(lifting_pose_trial, settings=settings), seed=args.seed,
+                            workers=getattr(args, "workers", 1), settings=settings.to_dict())
+
+
+def cmd_assets_lifting_poses(args: argparse.Namespace) -> int:
+    """The share of top-down poses that lift each object and its best pose's success, into objects.json."""
+    from glocal_ros.objects import ObjectSetMetadata, measure_lifting_poses, record_lifting_poses, unliftable
+
+    check = _lifting_pose_check(args)
+    tasks = sorted_tasks(ObjectSetMetadata.load(args.out).objects)
+    results = measure_lifting_poses(args.out, tasks, check.trial, check.seed, check.workers, _progress)
+    record_lifting_poses(args.out, results, check.record())
+    for task, (share, best) in results.items():
+        print(f"{task}: lifting poses {share:.0%}, best pose {best:.0%}")
+    failing = unliftable(results, check.min_best_pose_success)
+    print(f"recorded in {args.out / 'objects.json'}; best pose below {check.min_best_pose_success:.0%}: "
+          f"{', '.join(failing) or 'none'}")
+    return 1 if failing else 0
 
 
 def cmd_assets_show(args: argparse.Namespace) -> int:
@@ -224,13 +254,18 @@ def cmd_assets_validate(args: argparse.Namespace) -> int:
                       if o.perturbed_grasp_success is not None},
         "scripted": {t: o.scripted_grasp_success for t, o in metadata.objects.items()
                      if o.scripted_grasp_success is not None},
+        "lifting_poses": {t: o.lifting_pose_share for t, o in metadata.objects.items()
+                          if o.lifting_pose_share is not None},
+        "best_pose": {t: o.best_pose_success for t, o in metadata.objects.items()
+                      if o.best_pose_success is not None},
         "prior": prior_scores(args.out, tasks, args.episodes, seed=args.seed) if args.episodes else {},
         "steps_to_b": steps_to_b(transfer),
     }
     figure = validation_figure(measures, args.report.with_suffix(".png"))
     command = "glocal-ros " + " ".join(sys.argv[1:])
     preamble = (f"Objects: `{args.out}` (generator {metadata.generator_version}, {metadata.source}). (a) and (b) "
-                f"from its `objects.json` (`glocal-ros assets check`); (c) {args.episodes} deterministic "
+                f"from its `objects.json` (`glocal-ros assets check`), as are lifting poses and the best pose "
+                f"(`glocal-ros assets lifting-poses`); (c) {args.episodes} deterministic "
                 f"episodes of the shipped prior per object (seed {args.seed}), task bits it never trained on "
                 f"as the mean of the trained one; (d) goals of {', '.join(map(str, args.transfer or [])) or 'no'}"
                 f" transfer report ({args.recipe}). Figure: `{figure.name}`.")
@@ -312,6 +347,38 @@ def cmd_bench_transfer(args: argparse.Namespace) -> int:
              else run_transfer_bench(recipes, tasks, seeds, settings, args.jobs, **arms))
     report = transfer_bench_report(goals, command, settings, args.jobs, args.graph)
     return write_bench_report(report, args.out)
+
+
+def cmd_bench_cost(args: argparse.Namespace) -> int:
+    """A learning-cost map: steps to B per object and seed from the prior (``glocal_app.benches.cost``)."""
+    from glocal_app.benches.cost import (GOALS_FILE, check_cost, cost_figure, cost_report, cost_settings,
+                                         finished_goals, run_cost_map, select_tasks)
+
+    settings = cost_settings(args.step_budget, args.eval_interval, args.eval_episodes, args.envs,
+                             args.objects_dir)
+    tasks = select_tasks(args.tasks)
+    command = "glocal-ros " + " ".join(sys.argv[1:])
+    if args.tabulate:
+        check_cost(tasks, args.seeds, settings, args.jobs, args.profile)
+        held = finished_goals(args.work_dir, settings, args.profile)
+        goals = [held[(task, seed)] for task in tasks for seed in args.seeds if (task, seed) in held]
+        if not goals:
+            print(f"bench cost --tabulate: no finished goal of these tasks and seeds in {args.work_dir / GOALS_FILE}",
+                  file=sys.stderr)
+            return 1
+    else:
+        try:
+            goals = run_cost_map(tasks, args.seeds, settings, args.work_dir, args.jobs, args.profile)
+        except KeyboardInterrupt:
+            print(f"bench cost: interrupted; the finished goals are kept in {args.work_dir / GOALS_FILE}: the same "
+                  "command resumes", file=sys.stderr)
+            return 130
+    figure = cost_figure(goals, settings, args.out.with_suffix(".png"))
+    report = cost_report(goals, command, settings, tasks, args.seeds, args.jobs, figure, args.work_dir,
+                         tabulated=args.tabulate, profile=args.profile)
+    write_bench_report(report, args.out)
+    print(f"figure: {figure}")
+    return 0
 
 
 def cmd_bench_curriculum(args: argparse.Namespace) -> int:
@@ -434,7 +501,8 @@ def build_parser() -> argparse.ArgumentParser:
     evaluate.add_argument("--json", action="store_true", help="print one JSON object mapping task to score")
     evaluate.set_defaults(func=cmd_evaluate)
 
-    assets = commands.add_parser("assets", help="the object set: generate, import EGAD, check, show")
+    assets = commands.add_parser("assets", help="the object set: generate, import EGAD, check, lifting poses, "
+                                     "show, validate")
     asset_commands = assets.add_subparsers(dest="assets_command", required=True)
     generate = asset_commands.add_parser("generate", help="generate the 49 objects (seeded, about 6 minutes)")
     generate.add_argument("--seed", type=int, default=0)
@@ -455,6 +523,12 @@ def build_parser() -> argparse.ArgumentParser:
                                       "objects.json")
     check.add_argument("--seed", type=int, default=0)
     check.set_defaults(func=cmd_assets_check)
+    poses = asset_commands.add_parser(
+        "lifting-poses", help="the share of top-down poses that lift each object and its best pose's success, "
+        "into objects.json (exit 1 if a best pose lifts its object less than 80%% of the time)")
+    poses.add_argument("--seed", type=int, default=0)
+    poses.add_argument("--workers", type=_count(1), default=2, help="processes, one object each (default 2)")
+    poses.set_defaults(func=cmd_assets_lifting_poses)
     show = asset_commands.add_parser("show", help="every object's metrics")
     show.set_defaults(func=cmd_assets_show)
     validate = asset_commands.add_parser(
@@ -468,7 +542,7 @@ def build_parser() -> argparse.ArgumentParser:
     validate.add_argument("--report", type=Path, default=Path("bench/results/assets-validate.md"),
                           help="the report; the figure is written beside it as .png")
     validate.set_defaults(func=cmd_assets_validate)
-    for command in (generate, egad, check, show, validate):
+    for command in (generate, egad, check, poses, show, validate):
         command.add_argument("--out", type=Path, default=None, help="objects directory (default: the package's)")
     for command in (generate, egad, check):
         command.add_argument("--check-episodes", type=_count(0), default=30,
@@ -536,6 +610,41 @@ def build_parser() -> argparse.ArgumentParser:
                                      "with this --budget and --eval-interval)")
     bench_transfer.add_argument("--out", type=Path, default=Path("bench/results/transfer.md"))
     bench_transfer.set_defaults(func=cmd_bench_transfer)
+
+    bench_cost = bench_commands.add_parser(
+        "cost", help="a learning-cost map: steps to B per object from the prior, stopped at B and capped, "
+        "row medians, Spearman(letter, steps), a 7x7 heat map (resumable)")
+    bench_cost.add_argument("--tasks", default=cost_bench.DEFAULT_TASKS,
+                            help=f"all, per-row:K (K objects per row, every column covered), or comma-separated "
+                                 f"tasks (default: {cost_bench.DEFAULT_TASKS})")
+    bench_cost.add_argument("--seeds", type=_seed_list, default=list(cost_bench.DEFAULT_SEEDS),
+                            help="comma-separated goal seeds (default: "
+                                 f"{','.join(map(str, cost_bench.DEFAULT_SEEDS))})")
+    bench_cost.add_argument("--step-budget", type=int, default=cost_bench.DEFAULT_STEP_BUDGET, metavar="STEPS",
+                            help=f"the cap: training steps of a goal that does not pass B (default: "
+                                 f"{cost_bench.DEFAULT_STEP_BUDGET})")
+    bench_cost.add_argument("--eval-interval", type=int, default=cost_bench.DEFAULT_EVAL_INTERVAL, metavar="STEPS",
+                            help=f"training steps between evaluations (default: {cost_bench.DEFAULT_EVAL_INTERVAL})")
+    bench_cost.add_argument("--eval-episodes", type=int, default=cost_bench.DEFAULT_EVAL_EPISODES,
+                            help=f"episodes per evaluation, S-bar; B is 0.75 of them (default: the paper's "
+                                 f"{cost_bench.DEFAULT_EVAL_EPISODES})")
+    bench_cost.add_argument("--envs", type=int, default=transfer_defaults.num_envs,
+                            help=f"envs N per goal (default: {transfer_defaults.num_envs})")
+    bench_cost.add_argument("--jobs", type=int, default=os.cpu_count() or 1,
+                            help="goals run at a time (default: one per core)")
+    add_profile_argument(bench_cost)
+    bench_cost.add_argument("--objects-dir", type=Path, default=None, metavar="DIR",
+                            help="the object set to map, in the layout `assets generate` writes (default: the "
+                                 "shipped one)")
+    bench_cost.add_argument("--work-dir", type=Path, default=cost_bench.DEFAULT_WORK_DIR,
+                            help="where each goal is kept as it finishes (goals.jsonl), for the same command to "
+                                 f"skip (default: {cost_bench.DEFAULT_WORK_DIR})")
+    bench_cost.add_argument("--tabulate", action="store_true",
+                            help="run nothing: report the goals of these tasks and seeds that --work-dir holds "
+                                 "(same settings)")
+    bench_cost.add_argument("--out", type=Path, default=cost_bench.DEFAULT_REPORT,
+                            help="the report; the heat map is written beside it as .png")
+    bench_cost.set_defaults(func=cmd_bench_cost)
 
     bench_curriculum = bench_commands.add_parser(
         "curriculum", help="the paper's comparison: strategies x seeds at one training budget through the graph "

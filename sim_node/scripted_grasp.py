@@ -159,7 +159,7 @@ class ScriptedGraspPolicy:
             target, target_yaw, top = self._committed
             target = target.copy()
         else:
-            target, target_yaw, top = self._perturbed_pose(env, yaw)
+            target, target_yaw, top = self.grasp_target(env, yaw)
         aligned = (
             np.linalg.norm(target[:2] - tcp[:2]) < self.position_tolerance
             and abs(target_yaw - yaw) < self.yaw_tolerance
@@ -181,8 +181,12 @@ class ScriptedGraspPolicy:
         action[2:5] = (target - tcp) / env.config.translation_step
         return np.clip(action, -1.0, 1.0)
 
-    def _perturbed_pose(self, env: GraspEnv, yaw: float) -> tuple[np.ndarray, float, float]:
-        """``_grasp_pose`` off by ``self.error`` (offsets in the grasp's frame), and the object's top."""
+    def grasp_target(self, env: GraspEnv, yaw: float) -> tuple[np.ndarray, float, float]:
+        """Where the approach goes: TCP position and yaw, and the object's top, given the gripper's ``yaw``.
+
+        Here the narrowest span's pose (``_grasp_pose``) off by ``self.error`` (offsets in the grasp's
+        frame); a subclass that grasps elsewhere overrides it (``sim_node.lifting_poses.PoseGraspPolicy``).
+        """
         target, target_yaw, top = self._grasp_pose(env, yaw - self.error.yaw)
         closing = np.array((math.sin(target_yaw), -math.cos(target_yaw)))
         fingers = np.array((math.cos(target_yaw), math.sin(target_yaw)))

@@ -1,6 +1,7 @@
 """`glocal-ros assets validate`: the letter against measured grasp success, the prior's score, steps to B."""
 
 import math
+import shutil
 import subprocess
 import sys
 
@@ -8,6 +9,7 @@ import pytest
 
 from conftest import REPO
 from glocal_app.benches.assets import letter_correlation, prior_scores, validation_report
+from glocal_ros.objects import METADATA_FILE, record_lifting_poses
 from glocal_ros.paths import objects_dir
 from glocal_ros.tasks import ALL_TASKS
 
@@ -32,6 +34,17 @@ def test_the_report_has_a_correlation_per_measure_and_counts_never_as_slowest() 
     assert "| G0 | 10% | 100% | never |" in report and "A0 prior" not in report
 
 
+def test_the_report_has_the_share_of_lifting_poses_by_row_median_and_flags_an_unlearnable_object() -> None:
+    measures = {"lifting_poses": {"A0": 0.6, "A1": 0.2, "A2": 0.1, "D0": 0.4, "G0": 0.1},
+                "best_pose": {"A0": 1.0, "A1": 0.9, "A2": 0.8, "D0": 0.9, "G0": 0.5}}
+    report = validation_report(measures, "glocal-ros assets validate", "preamble")
+    rho, _ = letter_correlation(measures["lifting_poses"])
+    assert f"| lifting poses | 5 | {rho:.2f} | easier |" in report and "| best pose | 5 |" in report
+    assert "| A | 20% | 90% |" in report, "the row's median share of poses (the mean of its best poses)"
+    assert "**no**, 1 of 5 fail: G0 (50%)." in report
+    assert "| G0 | 10% | 50% (fails) |" in report and "| A2 | 10% | 80% |" in report
+
+
 def test_the_prior_is_scored_on_each_object_it_is_given() -> None:
     scores = prior_scores(objects_dir(), ["A0", "G6"], episodes=2, seed=0)
     assert set(scores) == {"A0", "G6"} and all(score in (0.0, 0.5, 1.0) for score in scores.values())
@@ -50,6 +63,19 @@ def test_validate_writes_the_table_and_the_figure_from_a_transfer_report(tmp_pat
     assert "| perturbed grasp | 49 |" in text and "| scripted grasp | 49 |" in text
     assert "| steps to B | 8 |" in text and "Command: `glocal-ros assets validate --episodes 0" in text
     assert report.with_suffix(".png").stat().st_size > 10_000
+
+
+def test_validate_reports_the_lifting_poses_objects_json_holds(tmp_path) -> None:
+    shutil.copy(objects_dir() / METADATA_FILE, tmp_path / METADATA_FILE)
+    record_lifting_poses(tmp_path, {"A0": (0.24, 1.0), "D3": (0.45, 1.0), "G0": (0.17, 0.7), "G6": (0.2, 1.0)},
+                         {"seed": 0})
+    report = tmp_path / "validate.md"
+    result = run_validate("--episodes", "0", "--out", str(tmp_path), "--report", str(report))
+    assert result.returncode == 0, result.stderr
+    text = report.read_text()
+    assert "| lifting poses | 4 |" in text and "| best pose | 4 |" in text and "| perturbed grasp | 49 |" in text
+    g0 = next(line for line in text.splitlines() if line.startswith("| G0 |"))
+    assert "fail: G0 (70%)." in text and g0.endswith("| 17% | 70% (fails) |")
 
 
 def test_validate_refuses_a_file_that_is_no_transfer_report(tmp_path) -> None:

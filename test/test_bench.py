@@ -214,3 +214,222 @@ def test_bench_transfer_command_line():
     assert build_parser().parse_args(["bench", "transfer"]).recipes == "default"
     args = build_parser().parse_args(["bench", "transfer", "--priors", "prior,prior-64x64", "--prior-store", "p"])
     assert (args.priors, args.prior_store) == ("prior,prior-64x64", Path("p"))
+
+
+# ---- bench cost ----------------------------------------------------------------------------------------------
+
+def cost_goal(task, seed, steps_to_b, cap=15_000, interval=1_000, episodes=100):
+    """A hand-made cost-map goal: scores below B (75 of 100) until ``steps_to_b``, there above it and stopped;
+    ``None``: below B at every evaluation up to the cap."""
+    last = cap if steps_to_b is None else steps_to_b
+    curve = tuple((steps, 80 if steps == steps_to_b else 10) for steps in range(0, last + 1, interval))
+    return TransferGoal("default", task, seed, curve, episodes, 0.75 * episodes, 30.0)
+
+
+#: Six objects, two seeds each: A1 passes at step 0, D3/G5/G6 are not learned within the cap on some seed.
+COST_GOALS = [cost_goal("A1", 0, 0), cost_goal("A1", 1, 0), cost_goal("A2", 0, 0), cost_goal("A2", 1, 1000),
+              cost_goal("B4", 0, 1000), cost_goal("B4", 1, 2000), cost_goal("D3", 0, 5000), cost_goal("D3", 1, None),
+              cost_goal("G5", 0, None), cost_goal("G5", 1, None), cost_goal("G6", 0, 14000), cost_goal("G6", 1, None)]
+
+
+def test_the_cost_map_statistics_count_a_goal_not_learned_as_above_the_cap():
+    import math
+
+    from scipy.stats import spearmanr
+
+    from glocal_app.benches.cost import (cost_settings, letter_spearman, object_medians, passed_at_start,
+                                         row_medians, targets)
+
+    assert cost_goal("G5", 0, None).steps_to_b is None and cost_goal("A2", 1, 1000).curve[-1] == (1000, 80)
+    # Per object: the median of its two seeds, their mean; not learned when either is.
+    assert object_medians(COST_GOALS) == {"A1": 0, "A2": 500, "B4": 1500, "D3": math.inf, "G5": math.inf,
+                                          "G6": math.inf}
+    # Per row: the median over all the row's goals, one vote each (G: 14000 and three not learned).
+    assert row_medians(COST_GOALS) == {"A": 0, "B": 1500, "D": math.inf, "G": math.inf}
+    assert row_medians([cost_goal("G6", 0, 14000), cost_goal("G6", 1, 16000), cost_goal("G5", 0, None)]) == \
+        {"G": 16000}
+    # Spearman over the objects' medians, not learned ranked above every learned one and tied among themselves.
+    rho, count = letter_spearman(COST_GOALS)
+    assert count == 6
+    assert rho == pytest.approx(spearmanr([0, 0, 1, 3, 6, 6], [0, 500, 1500, 10**9, 10**9, 10**9])[0])
+    assert letter_spearman([cost_goal("A1", 0, 0), cost_goal("D1", 0, 3000), cost_goal("G1", 0, None)]) == (1.0, 3)
+    assert math.isnan(letter_spearman(COST_GOALS[:4])[0])  # two objects: no correlation
+    assert passed_at_start(COST_GOALS) == ["A1"]  # A2 passed at step 0 on one seed of two only
+
+    spearman, easy, hard, start = targets(COST_GOALS, cost_settings())
+    assert spearman.met is (rho >= 0.8) and spearman.measured == f"{rho:+.2f} over 6 objects"
+    assert easy.met is False and easy.measured == "A 0, B 1,500"
+    assert hard.met is True and hard.measured == "G not learned within the cap of 15,000"
+    assert start.met is True and start.measured == "1 of 6 tested (the target's share of 6: 1.8): A1"
+    # Rows not tested: nothing to judge on.
+    (spearman, easy, hard, _) = targets([cost_goal("C1", 0, 3000)], cost_settings())
+    assert easy.met is None and easy.measured == "A untested, B untested" and hard.met is None
+    assert spearman.met is False and spearman.measured.startswith("not measurable")
+    # A cap below the target's 15,000: G not learned meets the target's words, and the report says why it tells
+    # nothing.
+    short = targets([cost_goal("G1", 0, None, cap=8000)], cost_settings(step_budget=8000))[2]
+    assert short.met is True and "a cap of 8,000 < 15,000" in short.measured
+
+
+def test_the_cost_report_and_heat_map_show_not_learned_as_such(tmp_path):
+    from glocal_app.benches.cost import cost_figure, cost_report, cost_settings
+
+    settings = cost_settings()
+    tasks = ["A1", "A2", "B4", "D3", "E0", "G5", "G6"]  # E0: selected, not finished
+    figure = cost_figure(COST_GOALS, settings, tmp_path / "cost.png")
+    assert figure.stat().st_size > 20_000
+    report = cost_report(COST_GOALS, "glocal-ros bench cost --tasks x", settings, tasks, [0, 1], 2, figure, tmp_path)
+    assert report.startswith("# bench cost")
+    assert "Command: `glocal-ros bench cost --tasks x`" in report and "Figure: `cost.png`" in report
+    assert "Goals finished: 12 of 14 (a partial map" in report
+    assert "| row A and B medians <= 1,000 steps | A 0, B 1,500 | missed |" in report
+    assert "| row G median >= 15,000 steps or not learned within the cap | G not learned within the cap of " \
+           "15,000 | met |" in report
+    assert "| G | 2 | 4 | 1 | 0 | not learned | 30 |" in report  # objects, goals, learned, at step 0, median, s
+    assert "| D | - | - | - | not learned | - | - | - |" in report  # the map's row D: D3 only
+    assert "| A | - | 0 | 500 | - | - | - | - |" in report
+    assert "| G6 | 14000 | - | not learned |" in report  # per object: each seed, then the median
+    assert "| G6 | 1 | " + " ".join(f"{s}:10" for s in range(0, 15001, 1000)) + " | - | 30 |" in report
+    assert "Cost of the map: 83,000 training steps" in report
+
+
+def test_the_per_row_selection_covers_every_column_and_bad_selections_are_refused():
+    from collections import Counter
+
+    from glocal_app.benches.cost import per_row_tasks, select_tasks
+    from glocal_ros.tasks import ALL_TASKS
+
+    three = select_tasks("per-row:3")
+    assert three == per_row_tasks(3) and len(three) == 21 and "A0" not in three
+    assert set(Counter(task[0] for task in three).values()) == {3}
+    assert set(Counter(task[1] for task in three).values()) == {3}  # every column, three times
+    assert select_tasks("per-row:7") == list(ALL_TASKS) == select_tasks("all")
+    assert len(set(task[1] for task in select_tasks("per-row:1"))) == 7
+    assert select_tasks("b1, a0") == ["A0", "B1"]
+    for bad, message in (("per-row:0", "1..7"), ("per-row:8", "1..7"), ("per-row:x", "per-row:K"),
+                         ("Z9", "Z9"), ("A0,A0", "must not repeat"), ("", "no task")):
+        with pytest.raises(ValueError, match=message):
+            select_tasks(bad)
+
+
+def test_the_goal_log_drops_a_torn_line_and_refuses_other_settings(tmp_path):
+    from glocal_app.benches.cost import (GOALS_FILE, GoalLog, cost_settings, finished_goals, goal_record,
+                                         object_fingerprint, run_key)
+
+    settings = cost_settings(step_budget=2000)
+    key = run_key(settings)
+    log = GoalLog(tmp_path)
+    for goal in (cost_goal("A1", 0, 0, cap=2000), cost_goal("G6", 0, None, cap=2000)):
+        log.append(goal_record(goal, key, object_fingerprint(goal.task)))
+    path = tmp_path / GOALS_FILE
+    whole = path.read_text()
+    path.write_text(whole + '{"task": "B2", "se')  # killed mid-write
+    goals = finished_goals(tmp_path, settings)
+    assert sorted(goals) == [("A1", 0), ("G6", 0)]
+    assert goals[("G6", 0)].steps_to_b is None and goals[("G6", 0)].curve[-1] == (2000, 10)
+    log.drop_torn_line()
+    assert path.read_text() == whole
+
+    with pytest.raises(ValueError, match=r"other settings \(step_budget 2000 \(now 3000\)\).*another --work-dir"):
+        finished_goals(tmp_path, cost_settings(step_budget=3000))
+    log.append(goal_record(cost_goal("A1", 0, 0, cap=2000), key, object_fingerprint("A1")))
+    with pytest.raises(ValueError, match="goal A1 seed 0 is in it twice"):
+        finished_goals(tmp_path, settings)
+    path.write_text(whole.replace(object_fingerprint("G6"), "0" * 16))
+    with pytest.raises(ValueError, match="the object of G6 has changed"):
+        finished_goals(tmp_path, settings)
+    path.write_text("not json\n")
+    with pytest.raises(ValueError, match="line 1: not a goal of bench cost"):
+        finished_goals(tmp_path, settings)
+
+
+def test_bench_cost_runs_real_goals_stopped_at_b_resumes_and_tabulates(tmp_path, capsys, monkeypatch):
+    """Real goals (PyBullet, SAC) through the command, tiny: the paper profile's prior (trained on A0, raw task
+    inputs elsewhere), a cap of 16 steps scored every 8 over 2 episodes. One task, then the same work dir with a
+    second task: only that one runs."""
+    import json
+
+    from glocal_app.cli import main
+
+    work, out = tmp_path / "work", tmp_path / "cost.md"
+    flags = ["--profile", "paper", "--seeds", "3", "--step-budget", "16", "--eval-interval", "8",
+             "--eval-episodes", "2", "--envs", "2", "--jobs", "1", "--work-dir", str(work), "--out", str(out)]
+
+    def cost(*args):
+        monkeypatch.setattr("sys.argv", ["glocal-ros", "bench", "cost", *args])
+        return main(["bench", "cost", *args])
+
+    assert cost("--tasks", "A0", *flags) == 0
+    first = (work / "goals.jsonl").read_text()
+    assert len(first.splitlines()) == 1
+    assert "0 of 1 goals finished before" in capsys.readouterr().out
+
+    assert cost("--tasks", "G6,A0", *flags) == 0
+    printed = capsys.readouterr().out
+    assert "1 of 2 goals finished before" in printed and "1 to run" in printed
+    lines = (work / "goals.jsonl").read_text().splitlines()
+    assert len(lines) == 2 and lines[0] == first.strip()  # A0 kept, not run again
+    for record in map(json.loads, lines):
+        steps = [s for s, _ in record["curve"]]
+        passed = [score > 1.5 for _, score in record["curve"]]
+        # Stopped at its first score above B, else scored at every interval up to the cap.
+        assert not any(passed[:-1])
+        assert passed[-1] or steps == [0, 8, 16]
+        assert steps == list(range(0, steps[-1] + 1, 8))
+        assert record["key"]["profile"] == "paper" and record["key"]["threshold"] == 1.5
+    report = out.read_text()
+    assert "Command: `glocal-ros bench cost --tasks G6,A0" in report and "Goals finished: 2 of 2." in report
+    assert "| A0 | 3 | " in report and "| G6 | 3 | " in report
+    assert out.with_suffix(".png").stat().st_size > 20_000
+
+    # Everything finished: the same command runs nothing; --tabulate neither, and says so.
+    assert cost("--tasks", "G6,A0", *flags) == 0
+    assert "2 of 2 goals finished before (in" in capsys.readouterr().out
+    out.unlink()
+    assert cost("--tasks", "all", *flags, "--tabulate") == 0
+    assert "tabulated from" in out.read_text() and "Goals finished: 2 of 49 (a partial map" in out.read_text()
+    assert (work / "goals.jsonl").read_text().splitlines() == lines
+
+    # The same work dir with another cap: refused before anything runs.
+    with pytest.raises(SystemExit) as exit:
+        cost("--tasks", "G6,A0", *flags[:4], "--step-budget", "24", *flags[6:])
+    assert exit.value.code == 2
+    assert "holds goals of other settings (step_budget 16 (now 24))" in capsys.readouterr().err
+    assert (work / "goals.jsonl").read_text().splitlines() == lines
+    assert cost("--tasks", "B1", *flags, "--tabulate") == 1
+    assert "no finished goal of these tasks and seeds" in capsys.readouterr().err
+
+
+@pytest.mark.parametrize("args, message", [
+    (["--tasks", "Z9"], "unknown task 'Z9'"),
+    (["--tasks", "per-row:9"], "objects per row must lie in 1..7"),
+    (["--step-budget", "500", "--eval-interval", "1000"], "below one evaluation interval"),
+    (["--eval-interval", "1002"], "multiple of the envs"),
+    (["--eval-episodes", "0"], "at least 1"),
+    (["--seeds", "1,1"], "must not repeat"),
+    (["--jobs", "0"], "at least one job"),
+    (["--tabulate", "--step-budget", "1500"], "divide the budget"),
+])
+def test_bench_cost_refuses_bad_input_before_anything_runs(tmp_path, capsys, args, message):
+    from glocal_app.cli import main
+
+    with pytest.raises(SystemExit) as exit:
+        main(["bench", "cost", "--work-dir", str(tmp_path / "work"), "--out", str(tmp_path / "cost.md"), *args])
+    assert exit.value.code == 2 and message in capsys.readouterr().err
+    assert not (tmp_path / "work").exists() and not (tmp_path / "cost.md").exists()
+
+
+def test_bench_cost_command_line_defaults():
+    from glocal_app.cli import cmd_bench_cost
+
+    args = build_parser().parse_args(["bench", "cost"])
+    assert args.func is cmd_bench_cost
+    assert (args.tasks, args.seeds, args.step_budget, args.eval_interval, args.eval_episodes, args.envs) == \
+        ("per-row:3", [0, 1], 15_000, 1_000, 100, 4)
+    assert (args.work_dir, args.out, args.tabulate, args.profile) == \
+        (Path("runs/bench-cost"), Path("bench/results/cost.md"), False, "glocal_ros")
+
+
+def test_goals_stopped_at_b_run_in_process_only():
+    with pytest.raises(ValueError, match="stop_at_threshold is in-process only"):
+        run_transfer_graph(["default"], ["A0"], [0], TransferSettings(stop_at_threshold=True))

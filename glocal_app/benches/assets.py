@@ -5,6 +5,10 @@ each measure, over the objects that have it:
 
 (a) perturbed-grasp success and (b) scripted-grasp success, as
     ``glocal-ros assets check`` stored them in ``objects.json``;
+(a') the share of top-down poses that lift the object, and its best pose's
+    success, as ``glocal-ros assets lifting-poses`` (or the asset pipeline)
+    stored them (``sim_node.lifting_poses``); a best pose below 80% breaks
+    the set's rule that every object stays learnable, and is flagged;
 (c) the A0 prior's score, ``episodes`` deterministic episodes per object,
     measured here. The prior meets each object as a Train goal meets it (the
     learner's default fine-tuning): the one-hot bits it never trained on start
@@ -14,8 +18,10 @@ each measure, over the objects that have it:
 (d) median steps to B per task of the goals of a ``glocal-ros bench transfer``
     report (optional; a goal that never passed counts as slower than any).
 
-The easy rows should be the easy objects: (a), (b) and (c) fall with the
-letter (negative), (d) rises with it.
+The easy rows should be the easy objects: (a), (a'), (b) and (c) fall with
+the letter (negative), (d) rises with it. Rows are summarised by the mean of
+shares of episodes and by the median of the share of lifting poses and of
+steps to B.
 """
 
 from __future__ import annotations
@@ -31,9 +37,14 @@ from glocal_ros.tasks import DIFFICULTY_LEVELS, COMPLEXITY_LEVELS, grid_coordina
 MEASURES = (
     ("perturbed", "perturbed grasp", "easier"),
     ("scripted", "scripted grasp", "easier"),
+    ("lifting_poses", "lifting poses", "easier"),
+    ("best_pose", "best pose", "easier"),
     ("prior", "A0 prior", "easier"),
     ("steps_to_b", "steps to B", "harder"),
 )
+
+#: Measures whose rows are summarised by their median (the others by their mean).
+_ROW_MEDIANS = ("lifting_poses", "steps_to_b")
 
 
 def prior_scores(objects_dir: Path, tasks: Sequence[str], episodes: int, seed: int = 0,
@@ -79,7 +90,8 @@ def letter_correlation(values: Mapping[str, float]) -> tuple[float, int]:
 
 
 def validation_report(measures: Mapping[str, Mapping[str, float]], command: str, preamble: str = "") -> str:
-    """The correlation table, the row means and the per-object table of ``measures`` (key -> task -> value)."""
+    """The correlation table, the learnable check, the row summaries and the per-object table of ``measures``
+    (key -> task -> value)."""
     lines = ["# assets validate: the letter against what the simulator and the learner measure", "",
              f"Command: `{command}`  ", preamble, "",
              "| measure | objects | Spearman (letter, measure) | a higher value means |",
@@ -89,7 +101,10 @@ def validation_report(measures: Mapping[str, Mapping[str, float]], command: str,
             rho, count = letter_correlation(measures[key])
             shown = "- (all equal)" if math.isnan(rho) else f"{rho:.2f}"
             lines.append(f"| {heading} | {count} | {shown} | {higher} |")
-    lines += ["", "Row means (share of episodes; steps to B: median of the row's tasks):", "",
+    if measures.get("best_pose"):
+        lines += ["", _learnable_line(measures["best_pose"])]
+    lines += ["", "Rows (shares of episodes: the mean of the row's tasks; lifting poses and steps to B: "
+              "their median):", "",
               "| row | " + " | ".join(heading for key, heading, _ in MEASURES if measures.get(key)) + " |",
               "| --- |" + " ---: |" * sum(1 for key, *_ in MEASURES if measures.get(key))]
     for letter in DIFFICULTY_LEVELS:
@@ -98,7 +113,7 @@ def validation_report(measures: Mapping[str, Mapping[str, float]], command: str,
             if not measures.get(key):
                 continue
             row = [value for task, value in measures[key].items() if task[0] == letter]
-            cells.append("-" if not row else _format(key, statistics.median(row) if key == "steps_to_b"
+            cells.append("-" if not row else _format(key, statistics.median(row) if key in _ROW_MEDIANS
                                                      else statistics.fmean(row)))
         lines.append(f"| {letter} | " + " | ".join(cells) + " |")
     keys = [key for key, *_ in MEASURES if measures.get(key)]
@@ -106,14 +121,32 @@ def validation_report(measures: Mapping[str, Mapping[str, float]], command: str,
               "| --- |" + " ---: |" * len(keys)]
     for task in sorted_tasks(set().union(*(measures[key] for key in keys))):
         lines.append(f"| {task} | " + " | ".join(
-            _format(key, measures[key][task]) if task in measures[key] else "-" for key in keys) + " |")
+            _object_cell(key, measures[key][task]) if task in measures[key] else "-" for key in keys) + " |")
     return "\n".join(lines) + "\n"
+
+
+def _learnable_line(best_pose: Mapping[str, float]) -> str:
+    """The objects whose best pose lifts them less often than the set's rule allows."""
+    from glocal_ros.objects.pipeline import MIN_BEST_POSE_SUCCESS
+
+    failing = [f"{task} ({best_pose[task]:.0%})" for task in sorted_tasks(best_pose)
+               if best_pose[task] < MIN_BEST_POSE_SUCCESS]
+    return (f"Every object learnable (its best scripted pose lifts it at least {MIN_BEST_POSE_SUCCESS:.0%} of "
+            f"the time): " + (f"**no**, {len(failing)} of {len(best_pose)} fail: {', '.join(failing)}."
+                               if failing else f"yes, all {len(best_pose)}."))
 
 
 def _format(key: str, value: float) -> str:
     if key == "steps_to_b":
         return "never" if math.isinf(value) else f"{value:.0f}"
     return f"{value:.0%}"
+
+
+def _object_cell(key: str, value: float) -> str:
+    """``_format``, and a best pose below the set's minimum flagged."""
+    from glocal_ros.objects.pipeline import MIN_BEST_POSE_SUCCESS
+
+    return _format(key, value) + (" (fails)" if key == "best_pose" and value < MIN_BEST_POSE_SUCCESS else "")
 
 
 def validation_figure(measures: Mapping[str, Mapping[str, float]], png: Path) -> Path:

@@ -6,7 +6,10 @@ profile's own; a profile refuses recipes it does not allow), prior, task and
 seed, one seeded Train goal from the prior with the same
 step budget, scored every ``eval_interval`` training steps on
 ``eval_episodes`` deterministic episodes (the paper's score), and never
-stopped when learned, so that the whole curve is seen. Per goal it records:
+stopped when learned, so that the whole curve is seen (``bench cost``,
+``glocal_app.benches.cost``, runs the same goals with the settings'
+``stop_at_threshold``: stopped at the first score above B, as a curriculum
+stops them). Per goal it records:
 
 - the curve: the score at step 0 (the prior as the goal starts it, on the
   episodes the goal's own step-0 evaluation would use) and at every interval;
@@ -56,7 +59,7 @@ from multiprocessing import get_context
 from pathlib import Path
 from typing import Callable, Sequence
 
-from glocal_ros.curriculum.learner import passes_threshold
+from glocal_ros.curriculum.learner import PAPER_THRESHOLD_FRACTION, passes_threshold
 from learner_node.profiles import DEFAULT_PROFILE, learner_profile
 from glocal_ros.seeds import MAX_SEED
 from glocal_ros.tasks import validate_tasks
@@ -78,8 +81,13 @@ class TransferSettings:
     step_budget: int = 3_000
     eval_interval: int = 500
     eval_episodes: int = 20
-    threshold_fraction: float = 0.75  # B as a share of eval_episodes: the paper's 75 of 100
+    threshold_fraction: float = PAPER_THRESHOLD_FRACTION  # B as a share of eval_episodes: the paper's 75 of 100
     num_envs: int = 4
+    #: Stop each goal at its first score above B, as a curriculum's goal stops (``TrainSpec.stop_when_learned``):
+    #: the goal's own check before its first step is then the curve's step 0, and the curve ends where it passed.
+    stop_at_threshold: bool = False
+    #: Where the goals' envs load the objects from; None: the shipped set (``sim_node.grasp_env``).
+    objects_dir: Path | None = None
 
     @property
     def threshold(self) -> float:
@@ -89,6 +97,9 @@ class TransferSettings:
         """Raise ``ValueError`` before anything runs, with what to change."""
         if min(self.step_budget, self.eval_interval, self.eval_episodes, self.num_envs) < 1:
             raise ValueError("the budget, evaluation interval, evaluation episodes and envs must be at least 1")
+        if self.step_budget < self.eval_interval:
+            raise ValueError(f"the budget ({self.step_budget}) is below one evaluation interval "
+                             f"({self.eval_interval}): no goal would be scored before its end")
         if self.eval_interval % self.num_envs or self.step_budget % self.eval_interval:
             raise ValueError(f"the evaluation interval ({self.eval_interval}) must be a multiple of the envs "
                              f"({self.num_envs}) and divide the budget ({self.step_budget}): every evaluation "
@@ -151,7 +162,11 @@ def fine_tuning_of(profile: str, recipe: str):
 
 def run_goal(recipe: str, prior: str, task: str, seed: int, settings: TransferSettings,
              prior_store: Path | None = None, profile: str = DEFAULT_PROFILE) -> TransferGoal:
-    """One seeded goal from ``prior`` in this process, on envs of its own; its curve and wall-clock."""
+    """One seeded goal from ``prior`` in this process, on envs of its own; its curve and wall-clock.
+
+    Its curve starts with the prior's score at step 0 on the episodes of the goal's own check before its first
+    step: with ``settings.stop_at_threshold`` that check itself (the goal runs it), else scored here.
+    """
     from glocal_ros.seeds import derived_seed
     from learner_node.evaluation import evaluate
     from learner_node.policies import PolicyRegistry
@@ -161,20 +176,22 @@ def run_goal(recipe: str, prior: str, task: str, seed: int, settings: TransferSe
     from sim_node.grasp_env import GraspEnv
 
     work = Path(tempfile.mkdtemp(prefix="glocal-bench-transfer-"))
-    envs = BatchedEnvs(lambda i: GraspEnv(task), settings.num_envs, task)
+    envs = BatchedEnvs(lambda i: GraspEnv(task, settings.objects_dir), settings.num_envs, task)
     try:
         policies = PolicyRegistry(PolicyStore(work / "policies"), prior_stores(prior_store, profile), seed=seed)
         started = time.perf_counter()
         trainer = Trainer(envs, policies, work / "checkpoints", seed, checkpoint_interval=10**12,
                           profile=learner_profile(profile), fine_tuning=fine_tuning_of(profile, recipe))
-        # The prior as the goal starts it, on the episodes the goal's own step-0 evaluation would score.
-        (start,) = evaluate(envs, trainer.evaluation_policy(prior, [task]), [task], settings.eval_episodes,
-                            seed=derived_seed(seed, EVALUATION_STREAM, 0))
-        curve = [(0, start.successes)]
+        curve = []
+        if not settings.stop_at_threshold:
+            # The prior as the goal starts it, on the episodes the goal's own step-0 evaluation would score.
+            (start,) = evaluate(envs, trainer.evaluation_policy(prior, [task]), [task], settings.eval_episodes,
+                                seed=derived_seed(seed, EVALUATION_STREAM, 0))
+            curve.append((0, start.successes))
         trainer.train(TrainSpec(task=task, initial_policy=prior, output_policy="transfer",
                                 step_budget=settings.step_budget, threshold=settings.threshold,
                                 eval_episodes=settings.eval_episodes, eval_interval=settings.eval_interval,
-                                seed=seed),
+                                stop_when_learned=settings.stop_at_threshold, seed=seed),
                       on_evaluation=lambda score, steps: curve.append((steps, score.successes)))
         return TransferGoal(recipe, task, seed, tuple(curve), settings.eval_episodes, settings.threshold,
                             time.perf_counter() - started, prior, profile)
@@ -193,7 +210,7 @@ def run_transfer_bench(recipes: Sequence[str], tasks: Sequence[str], seeds: Sequ
                        profiles: Sequence[str] = (DEFAULT_PROFILE,)) -> list[TransferGoal]:
     """Every (profile, recipe, prior, task, seed) goal, ``jobs`` at a time; in the order task, seed, profile,
     prior, recipe."""
-    _check(recipes, priors, prior_store, tasks, seeds, settings, jobs, profiles)
+    check_goals(recipes, priors, prior_store, tasks, seeds, settings, jobs, profiles)
     work = [(recipe, prior, task, seed, settings, prior_store, profile)
             for task in tasks for seed in seeds for profile in profiles for prior in priors for recipe in recipes]
     goals = []
@@ -205,7 +222,7 @@ def run_transfer_bench(recipes: Sequence[str], tasks: Sequence[str], seeds: Sequ
     return goals
 
 
-def _check(recipes: Sequence[str], priors: Sequence[str], prior_store: Path | None, tasks: Sequence[str],
+def check_goals(recipes: Sequence[str], priors: Sequence[str], prior_store: Path | None, tasks: Sequence[str],
            seeds: Sequence[int], settings: TransferSettings, jobs: int,
            profiles: Sequence[str] = (DEFAULT_PROFILE,)) -> None:
     """Raise ``ValueError`` for anything that would fail later, before any goal runs."""
@@ -228,7 +245,7 @@ def _check(recipes: Sequence[str], priors: Sequence[str], prior_store: Path | No
     validate_tasks(list(tasks))
     settings.check()
     if not recipes or not priors or not tasks or not seeds or not profiles or jobs < 1:
-        raise ValueError("bench transfer needs a profile, a recipe, a prior, a task, a seed and at least one job")
+        raise ValueError("the goals need a profile, a recipe, a prior, a task, a seed and at least one job")
     if any(len(set(values)) != len(values) for values in (recipes, priors, tasks, seeds, profiles)):
         raise ValueError("profiles, recipes, priors, tasks and seeds must not repeat")
     if not all(0 <= seed <= MAX_SEED for seed in seeds):
@@ -262,7 +279,9 @@ def run_transfer_graph(recipes: Sequence[str], tasks: Sequence[str], seeds: Sequ
     from learner_node.training import EVALUATION_STREAM
     from node_common import names, qos
 
-    _check(recipes, priors, prior_store, tasks, seeds, settings, 1, profiles)
+    check_goals(recipes, priors, prior_store, tasks, seeds, settings, 1, profiles)
+    if settings.stop_at_threshold:
+        raise ValueError("through the graph the goals run to their budget: stop_at_threshold is in-process only")
     domain_id, lock = reserve_domain_id()
     work = Path(tempfile.mkdtemp(prefix="glocal-bench-transfer-graph-"))
     env = isolated_environment(domain_id, work / "logs")

@@ -43,6 +43,11 @@ class ObjectMetadata:
     # (exact, with retries) and a single perturbed grasp lift the object.
     scripted_grasp_success: Optional[float] = None
     perturbed_grasp_success: Optional[float] = None
+    # Measured in the simulator (sim_node.lifting_poses, see record_lifting_poses): the share of top-down
+    # poses over the object's footprint, yaw uniform, whose scripted descent, close and lift lifts it; and
+    # the success rate of its best pose, repeated (the set keeps it at 80% or more).
+    lifting_pose_share: Optional[float] = None
+    best_pose_success: Optional[float] = None
 
 
 @dataclass
@@ -57,6 +62,8 @@ class ObjectSetMetadata:
     seed: Optional[int] = None
     candidates: Optional[int] = None
     valid_candidates: Optional[int] = None
+    lifting_poses: Optional[dict[str, Any]] = None
+    """How ``lifting_pose_share`` was measured: seed, budget, the best pose's minimum success."""
 
     def to_dict(self) -> dict[str, Any]:
         return asdict(self)
@@ -90,5 +97,22 @@ def record_grasp_success(objects_dir: Path, scripted: Mapping[str, float] = {},
             if task not in metadata.objects:
                 raise KeyError(f"task {task!r} is not in {Path(objects_dir) / METADATA_FILE}")
             setattr(metadata.objects[task], name, float(rate))
+    metadata.save(objects_dir)
+    return metadata
+
+
+def record_lifting_poses(objects_dir: Path, results: Mapping[str, tuple[float, float]],
+                         settings: Mapping[str, Any]) -> ObjectSetMetadata:
+    """Store (share of lifting poses, best pose's success) per task in ``objects.json``, and how they were
+    measured (``settings``) in its ``lifting_poses``; tasks not given keep their values. Written atomically,
+    and not at all if a task is not in the set (``KeyError``)."""
+    metadata = ObjectSetMetadata.load(objects_dir)
+    unknown = [task for task in results if task not in metadata.objects]
+    if unknown:
+        raise KeyError(f"tasks {unknown} are not in {Path(objects_dir) / METADATA_FILE}")
+    for task, (share, best) in results.items():
+        metadata.objects[task].lifting_pose_share = float(share)
+        metadata.objects[task].best_pose_success = float(best)
+    metadata.lifting_poses = dict(settings)
     metadata.save(objects_dir)
     return metadata

@@ -10,6 +10,12 @@ into it at the end, so a failure leaves ``out_dir`` as it was.
 The letter is either the geometric difficulty (``assign_grid``) or, given a
 ``MeasuredGrid``, what the simulator measures (``assign_measured_grid``): the
 simulator is passed in as a ``GraspTrial``, so this package does not import it.
+
+Given a ``LiftingPoseCheck``, the share of top-down poses that lift each
+object and its best pose's success are measured on the staged objects and
+stored beside the other metrics; a set in which some object's best pose lifts
+it less than ``min_best_pose_success`` of the time is refused
+(``UnliftableObjectError``) before anything is written.
 """
 
 from __future__ import annotations
@@ -72,6 +78,14 @@ ProgressCallback = Callable[[str, int, int], None]
 #: the object of ``task`` in ``objects_dir``, measured in the simulator; a function of ``seed``.
 GraspTrial = Callable[[Path, str, int], tuple[float, float]]
 
+#: ``lifting_pose_trial(objects_dir, task, seed)``: (share of top-down poses that lift it, its best pose's
+#: success), 0..1, of the object of ``task`` in ``objects_dir``; a function of ``seed`` and ``task``
+#: (``sim_node.lifting_poses.lifting_pose_trial``).
+LiftingPoseTrial = Callable[[Path, str, int], tuple[float, float]]
+
+#: Keep every object learnable: its best scripted pose lifts it at least this often.
+MIN_BEST_POSE_SUCCESS = 0.8
+
 
 @dataclass(frozen=True)
 class MeasuredGrid:
@@ -85,6 +99,29 @@ class MeasuredGrid:
     grasp_trial: GraspTrial
     per_column: int = 32
     min_scripted_success: float = 0.8
+
+
+@dataclass(frozen=True)
+class LiftingPoseCheck:
+    """Measure the share of lifting poses of every written object, and refuse a set with an object whose
+    best pose lifts it less than ``min_best_pose_success`` of the time.
+
+    ``settings`` (the trial's budget) is recorded in ``objects.json`` with the seed.
+    """
+
+    trial: LiftingPoseTrial
+    seed: int = 0
+    min_best_pose_success: float = MIN_BEST_POSE_SUCCESS
+    workers: int = 1
+    settings: dict = field(default_factory=dict)
+
+    def record(self) -> dict:
+        """What ``objects.json`` records of this measurement (``ObjectSetMetadata.lifting_poses``)."""
+        return {"seed": self.seed, "min_best_pose_success": self.min_best_pose_success, **self.settings}
+
+
+class UnliftableObjectError(ValueError):
+    """Some object's best top-down pose lifts it less often than the set allows; the message names them."""
 
 
 @dataclass(frozen=True)
@@ -290,6 +327,54 @@ def trial_candidates(seed: int, indices: Sequence[int], config: GeneratorConfig,
     return results
 
 
+def _lifting_star(args: tuple) -> tuple[str, float, float]:
+    objects_dir, task, seed, trial = args
+    return (task, *trial(objects_dir, task, seed))
+
+
+def measure_lifting_poses(objects_dir: Path, tasks: Sequence[str], trial: LiftingPoseTrial, seed: int,
+                          workers: int = 1, progress: Optional[ProgressCallback] = None,
+                          ) -> dict[str, tuple[float, float]]:
+    """(share of lifting poses, best pose's success) of each task's object in ``objects_dir``, measured by
+    ``trial`` (each task seeded by ``seed`` alone, so results do not depend on ``workers``)."""
+    jobs = [(Path(objects_dir), task, seed, trial) for task in tasks]
+    results: dict[str, tuple[float, float]] = {}
+    with contextlib.ExitStack() as stack:
+        if workers > 1 and len(jobs) > 1:
+            pool = stack.enter_context(concurrent.futures.ProcessPoolExecutor(max_workers=workers))
+            outcomes = pool.map(_lifting_star, jobs)
+        else:
+            outcomes = map(_lifting_star, jobs)
+        for task, share, best in outcomes:
+            results[task] = (share, best)
+            if progress:
+                progress("lifting poses", len(results), len(jobs))
+    return results
+
+
+def unliftable(results: dict[str, tuple[float, float]], minimum: float = MIN_BEST_POSE_SUCCESS) -> list[str]:
+    """"A2 (best pose lifts it 60% of the time)" for each task of ``results`` whose best pose falls short of
+    ``minimum``, in the order given."""
+    return [f"{task} (best pose lifts it {best:.0%} of the time)" for task, (_, best) in results.items()
+            if best < minimum]
+
+
+def _check_lifting_poses(staging: Path, metadata: ObjectSetMetadata, check: LiftingPoseCheck,
+                         out_dir: Path, progress: Optional[ProgressCallback]) -> None:
+    """Measure the staged objects into ``metadata``; ``UnliftableObjectError`` if one breaks the rule."""
+    results = measure_lifting_poses(staging, list(metadata.objects), check.trial, check.seed, check.workers,
+                                    progress)
+    failing = unliftable(results, check.min_best_pose_success)
+    if failing:
+        raise UnliftableObjectError(
+            f"every object's best top-down pose must lift it at least {check.min_best_pose_success:.0%} of the "
+            f"time, and {len(failing)} do not: {', '.join(failing)}; {out_dir} is unchanged")
+    for task, (share, best) in results.items():
+        metadata.objects[task].lifting_pose_share = share
+        metadata.objects[task].best_pose_success = best
+    metadata.lifting_poses = check.record()
+
+
 def generate_object_set(
     out_dir: Path,
     seed: int = 0,
@@ -300,6 +385,7 @@ def generate_object_set(
     tasks: Optional[Sequence[str]] = None,
     contact_sheet: bool = True,
     measured: Optional[MeasuredGrid] = None,
+    lifting_poses: Optional[LiftingPoseCheck] = None,
 ) -> ObjectSetMetadata:
     """Generate a seeded candidate pool, bin it on the grid and write the chosen objects.
 
@@ -314,6 +400,8 @@ def generate_object_set(
         whole pool); ``objects.json`` then lists only them.
     :param contact_sheet: also render ``<out_dir>/contact_sheet.png``.
     :param measured: choose letters by grasps in the simulator rather than by the geometric difficulty.
+    :param lifting_poses: measure the share of lifting poses and refuse an unliftable object
+        (``UnliftableObjectError``, ``out_dir`` unchanged).
     """
     chosen_tasks = validate_tasks(tasks) if tasks is not None else list(ALL_TASKS)
     pool = sample_candidates(seed, candidates, config, workers, progress)
@@ -362,6 +450,8 @@ def generate_object_set(
             )
             if progress:
                 progress("objects", done, len(chosen_tasks))
+        if lifting_poses is not None:
+            _check_lifting_poses(staging, metadata, lifting_poses, Path(out_dir), progress)
         metadata.save(staging)
         if contact_sheet:
             render_contact_sheet(staging, staging / "contact_sheet.png")
@@ -403,6 +493,7 @@ def import_egad(
     require_all: bool = True,
     progress: Optional[ProgressCallback] = None,
     contact_sheet: bool = True,
+    lifting_poses: Optional[LiftingPoseCheck] = None,
 ) -> ObjectSetMetadata:
     """Build the same layout from EGAD's evaluation-set meshes (``A0.obj`` .. ``G6.obj``).
 
@@ -417,6 +508,8 @@ def import_egad(
 
     :param require_all: raise :class:`MissingEgadFilesError` unless all 49 files exist;
         if False, import whichever of them exist (at least one).
+    :param lifting_poses: measure the share of lifting poses and refuse an unliftable object
+        (``UnliftableObjectError``, ``out_dir`` unchanged).
     """
     src_dir, out_dir = Path(src_dir), Path(out_dir)
     found = {task: src_dir / f"{task}.obj" for task in ALL_TASKS if (src_dir / f"{task}.obj").exists()}
@@ -439,6 +532,8 @@ def import_egad(
             )
             if progress:
                 progress("objects", done, len(found))
+        if lifting_poses is not None:
+            _check_lifting_poses(staging, metadata, lifting_poses, out_dir, progress)
         metadata.save(staging)
         if contact_sheet:
             render_contact_sheet(staging, staging / "contact_sheet.png")
