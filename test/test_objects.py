@@ -34,14 +34,17 @@ from glocal_ros.objects import (
 from glocal_ros.objects.grid import assign_measured_grid, shortlist
 from glocal_ros.objects.meshing import prepare_for_gripper
 from glocal_ros.objects.metrics import angular_deficits
+from glocal_ros.objects.physics import VhacdConfig
 from glocal_ros.objects.pipeline import candidate_mesh
 from glocal_ros.objects.raycast import first_hits
 from glocal_ros.tasks import ALL_TASKS, grid_coordinates
 
 REPO = Path(__file__).resolve().parents[1]
 ASSETS = REPO / "assets" / "objects"
-# Small enough that a whole pool takes seconds; only tests use it.
-FAST = GeneratorConfig(resolution=28, coarse_resolution=20, visual_faces=300, grasp_samples=120)
+# Small enough that a whole pool takes seconds; only tests use it. V-HACD at a tenth of its voxels: the
+# decomposition runs for every object written, and its quality is the committed set's to check.
+FAST = GeneratorConfig(resolution=28, coarse_resolution=20, visual_faces=300, grasp_samples=120,
+                       vhacd=VhacdConfig(resolution=20_000))
 TOL = 1e-3
 
 
