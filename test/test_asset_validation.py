@@ -1,7 +1,7 @@
 """`glocal-ros assets validate`: the letter against measured grasp success, the prior's score, steps to B."""
 
+import json
 import math
-import shutil
 import subprocess
 import sys
 
@@ -66,7 +66,10 @@ def test_validate_writes_the_table_and_the_figure_from_a_transfer_report(tmp_pat
 
 
 def test_validate_reports_the_lifting_poses_objects_json_holds(tmp_path) -> None:
-    shutil.copy(objects_dir() / METADATA_FILE, tmp_path / METADATA_FILE)
+    committed = json.loads((objects_dir() / METADATA_FILE).read_text())
+    for metrics in committed["objects"].values():  # as before any object was measured
+        metrics["lifting_pose_share"] = metrics["best_pose_success"] = None
+    (tmp_path / METADATA_FILE).write_text(json.dumps(committed))
     record_lifting_poses(tmp_path, {"A0": (0.24, 1.0), "D3": (0.45, 1.0), "G0": (0.17, 0.7), "G6": (0.2, 1.0)},
                          {"seed": 0})
     report = tmp_path / "validate.md"

@@ -32,6 +32,7 @@ from pathlib import Path
 from typing import Mapping, Sequence
 
 from glocal_ros.tasks import DIFFICULTY_LEVELS, COMPLEXITY_LEVELS, grid_coordinates, sorted_tasks
+from learner_node.profiles import DEFAULT_PROFILE, learner_profile
 
 #: (key, heading, what a higher value means) of each measure, in the report's order.
 MEASURES = (
@@ -48,22 +49,26 @@ _ROW_MEDIANS = ("lifting_poses", "steps_to_b")
 
 
 def prior_scores(objects_dir: Path, tasks: Sequence[str], episodes: int, seed: int = 0,
-                 num_envs: int = 2) -> dict[str, float]:
-    """Share of ``episodes`` seeded deterministic episodes in which the shipped prior lifts each object."""
-    from glocal_ros.paths import assets_dir
+                 num_envs: int = 2, profile: str = DEFAULT_PROFILE) -> dict[str, float]:
+    """Share of ``episodes`` seeded deterministic episodes in which ``profile``'s shipped prior lifts each
+    object, scored as ``learner/evaluate`` scores it (a goal's check before its first step)."""
+    import tempfile
+
     from learner_node.evaluation import evaluate
-    from learner_node.fine_tuning import start_fine_tuning
+    from learner_node.policies import PolicyRegistry
     from learner_node.policy_store import PolicyStore
-    from learner_node.sac_settings import FineTuning
+    from learner_node.training import Trainer
     from sim_node.batch import BatchedEnvs
     from sim_node.grasp_env import GraspEnv
 
-    model = PolicyStore(assets_dir() / "priors").load("prior")
-    start_fine_tuning(model, FineTuning(new_task_inputs="trained-mean"), tasks)
+    shipped = learner_profile(profile)
     envs = BatchedEnvs(lambda i: GraspEnv(tasks[0], objects_dir=objects_dir), num_envs, tasks[0])
     try:
-        scores = evaluate(envs, lambda obs: model.predict(obs, deterministic=True)[0], tasks, episodes,
-                          policy_name="prior", seed=seed)
+        with tempfile.TemporaryDirectory(prefix="glocal-validate-") as work:
+            policies = PolicyRegistry(PolicyStore(Path(work) / "policies"), [PolicyStore(shipped.shipped_priors())])
+            trainer = Trainer(envs, policies, Path(work) / "checkpoints", profile=shipped)
+            scores = evaluate(envs, trainer.evaluation_policy("prior", tasks), tasks, episodes,
+                              policy_name="prior", seed=seed)
     finally:
         envs.close()
     return {score.task: score.successes / score.episodes for score in scores}
