@@ -101,13 +101,15 @@ def spin_node(make_node: Callable[[], Node], args: Sequence[str] | None = None, 
 
 
 @contextmanager
-def spinning_node(name: str, domain_id: int) -> Iterator[Node]:
-    """A node on a context of its own, spun in a background thread: for tools that call nodes (the benches)."""
+def spinning_node(name: str, domain_id: int, num_threads: int = 1) -> Iterator[Node]:
+    """A node on a context of its own, spun in a background thread: for tools that call nodes (the benches,
+    the tests); ``num_threads`` > 1 runs callbacks in parallel, as ``spin_node``'s does."""
     configure_discovery()
     context = rclpy.Context()
     rclpy.init(context=context, domain_id=domain_id)
     node = rclpy.create_node(name, context=context)
-    executor = SingleThreadedExecutor(context=context)
+    executor = (MultiThreadedExecutor(num_threads, context=context) if num_threads > 1
+                else SingleThreadedExecutor(context=context))
     executor.add_node(node)
     stop = threading.Event()
     spinner = threading.Thread(target=lambda: [executor.spin_once(0.1) for _ in iter(stop.is_set, True)],

@@ -10,7 +10,6 @@ from __future__ import annotations
 import os
 import sys
 import tempfile
-import threading
 import time
 from contextlib import contextmanager
 from pathlib import Path
@@ -67,33 +66,11 @@ def node_starter(log_dir: Path) -> Iterator[Callable[..., NodeProcess]]:
             process.stop()
 
 
-@contextmanager
-def spun_test_node() -> Iterator:
-    """An rclpy node of the test itself, spun by a background executor."""
-    import rclpy
-    from rclpy.executors import MultiThreadedExecutor
+def spun_test_node():
+    """An rclpy node of the test itself, spun by a background executor, on this run's domain."""
+    from node_common.runner import spinning_node
 
-    context = rclpy.Context()
-    rclpy.init(context=context)
-    node = rclpy.create_node(f"test_{os.getpid()}", context=context)
-    executor = MultiThreadedExecutor(num_threads=4, context=context)
-    executor.add_node(node)
-    stop = threading.Event()
-
-    def spin():
-        while not stop.is_set():
-            executor.spin_once(timeout_sec=0.1)
-
-    spinner = threading.Thread(target=spin, daemon=True)
-    spinner.start()
-    try:
-        yield node
-    finally:
-        stop.set()
-        spinner.join(5)
-        executor.shutdown()
-        node.destroy_node()
-        rclpy.shutdown(context=context)
+    return spinning_node(f"test_{os.getpid()}", int(os.environ["ROS_DOMAIN_ID"]), num_threads=4)
 
 
 @pytest.fixture

@@ -308,18 +308,23 @@ def _trial_star(args: tuple) -> tuple[int, float, float]:
     return _trial_candidate(*args)
 
 
+@contextlib.contextmanager
+def _mapped(function: Callable, jobs: Sequence[tuple], workers: int) -> Iterator:
+    """``map(function, jobs)``, in ``workers`` processes when there are several of both."""
+    if workers > 1 and len(jobs) > 1:
+        with concurrent.futures.ProcessPoolExecutor(max_workers=workers) as pool:
+            yield pool.map(function, jobs)
+    else:
+        yield map(function, jobs)
+
+
 def trial_candidates(seed: int, indices: Sequence[int], config: GeneratorConfig, grasp_trial: GraspTrial,
                      work_dir: Path, workers: int = 1,
                      progress: Optional[ProgressCallback] = None) -> dict[int, tuple[float, float]]:
     """(perturbed, scripted) grasp success of each candidate in ``indices``."""
     jobs = [(seed, index, config, grasp_trial, work_dir) for index in indices]
     results: dict[int, tuple[float, float]] = {}
-    with contextlib.ExitStack() as stack:
-        if workers > 1:
-            pool = stack.enter_context(concurrent.futures.ProcessPoolExecutor(max_workers=workers))
-            outcomes = pool.map(_trial_star, jobs)
-        else:
-            outcomes = map(_trial_star, jobs)
+    with _mapped(_trial_star, jobs, workers) as outcomes:
         for index, perturbed, scripted in outcomes:
             results[index] = (perturbed, scripted)
             if progress:
@@ -339,12 +344,7 @@ def measure_lifting_poses(objects_dir: Path, tasks: Sequence[str], trial: Liftin
     ``trial`` (each task seeded by ``seed`` alone, so results do not depend on ``workers``)."""
     jobs = [(Path(objects_dir), task, seed, trial) for task in tasks]
     results: dict[str, tuple[float, float]] = {}
-    with contextlib.ExitStack() as stack:
-        if workers > 1 and len(jobs) > 1:
-            pool = stack.enter_context(concurrent.futures.ProcessPoolExecutor(max_workers=workers))
-            outcomes = pool.map(_lifting_star, jobs)
-        else:
-            outcomes = map(_lifting_star, jobs)
+    with _mapped(_lifting_star, jobs, workers) as outcomes:
         for task, share, best in outcomes:
             results[task] = (share, best)
             if progress:
