@@ -13,6 +13,11 @@ from glocal_ros.tasks import NUM_TASKS
 OBS_DIM = NUM_TASKS + 6 + 6 + 2
 #: gripper open/close, rotation about the table normal, 3D translation.
 ACTION_DIM = 5
+#: Version of the meaning of the OBS_DIM numbers (``sim_node.grasp_env``). Layout 1 gave the object's
+#: yaw relative to the gripper's as the sine and cosine of twice that angle, which hid a half turn;
+#: layout 2 gives those of the angle itself. A policy of one layout acts blindly on another of the
+#: same size, so stored policies record theirs and the learner refuses a mismatch.
+OBSERVATION_LAYOUT = 2
 
 #: Physics steps per env step, by default.
 SUBSTEPS = 10

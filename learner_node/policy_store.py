@@ -22,6 +22,7 @@ from pathlib import Path
 from typing import Any
 
 from glocal_ros.files import atomic_write
+from glocal_ros.spaces import OBSERVATION_LAYOUT
 from learner_node.replay_buffer import Experience, load_experience, save_experience
 from learner_node.sac_settings import load_model
 
@@ -57,6 +58,9 @@ class PolicyRecord:
     # The learner profile it was trained under (``learner_node.profiles``); records from before profiles
     # existed were all trained as ``glocal_ros``.
     profile: str = "glocal_ros"
+    # The observation it acts on (``glocal_ros.spaces.OBSERVATION_LAYOUT``); records without one are
+    # of layout 1, the only one before the field existed.
+    observation_layout: int = OBSERVATION_LAYOUT
 
 
 def check_name(name: str) -> str:
@@ -81,7 +85,7 @@ class PolicyStore:
         path = self.root / check_name(name) / METADATA_FILE
         if not path.is_file():
             raise UnknownPolicyError(name)
-        record = PolicyRecord(**json.loads(path.read_text()))
+        record = PolicyRecord(**{"observation_layout": 1, **json.loads(path.read_text())})
         if record.model_file and not _MODEL_FILE.match(record.model_file):
             raise ValueError(f"{path}: model_file {record.model_file!r} is not a model file of this store "
                              f"(model-<N>.zip): refusing to load it")

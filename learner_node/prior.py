@@ -42,7 +42,7 @@ Demonstrator = Callable[[gym.Env], np.ndarray]
 class PriorConfig:
     task: str = "A0"
     demo_episodes: int = 50
-    max_steps: int = 150_000  # env steps of SAC training
+    max_steps: int = 300_000  # env steps of SAC training; the paper profile's prior of layout 2 took 180,074
     checkpoint_every: int = 5_000
     stop_success_rate: float = 0.95  # of the last 50 training episodes ...
     # ... once at least this many steps are trained. The SBX 64x64 prior passed the rate at 64k steps with

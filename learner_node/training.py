@@ -214,7 +214,9 @@ class Trainer:
         return _Goal(self, spec, on_progress, should_stop, between_steps, on_evaluation).run()
 
     def check_initial_policy(self, name: str) -> None:
-        """``ValueError`` unless a goal of this trainer may start from ``name``: a policy of its profile."""
+        """``ValueError`` unless a goal of this trainer may start from ``name``: a policy of its profile
+        that acts on the sim's observation layout."""
+        self.policies.check_observation_layout(name)
         record = self.policies.record(name)
         if record.profile != self.profile.name:
             raise ValueError(f"policy {name!r} was trained under learner profile {record.profile!r}, and this "

@@ -27,8 +27,9 @@ Moves are relative to the measured TCP pose and kept inside the workspace:
 [-pi/2, pi/2] would reach every grasp; the extra pi/8 on each side means no
 object orientation forces a swing across the whole range.
 
-Observation (63, float32), positions in metres, in the world axes with the
-origin at ``OBJECT_SPOT`` on the table top (see ``OBS_*`` slices):
+Observation (63, float32, layout ``OBSERVATION_LAYOUT``), positions in metres,
+in the world axes with the origin at ``OBJECT_SPOT`` on the table top (see
+``OBS_*`` slices):
 
 ====== ====================================================================
 index  meaning
@@ -38,8 +39,10 @@ index  meaning
 52, 53 sin, cos of the gripper yaw
 54     gripper opening (0 closed .. 0.08 open)
 55..57 object position minus TCP position
-58, 59 sin, cos of twice (object yaw - gripper yaw): the gripper and
-       box-like objects look the same after a half turn
+58, 59 sin, cos of (object yaw - gripper yaw), the object's yaw being
+       the heading of its link x axis: a half turn of the object shows,
+       since few objects look the same after one (the gripper does, and
+       the policy learns that)
 60     object lift: its height above where it settled after the reset
 61, 62 left, right finger touches the object (0 or 1)
 ====== ====================================================================
@@ -337,7 +340,7 @@ class GraspEnv(gym.Env[np.ndarray, np.ndarray]):
         position, orientation = self.world.object_pose()
         lift = self.world.object_lift(position)
         left, right = self.world.finger_contacts()
-        relative_yaw = 2.0 * (yaw_of(tuple(orientation)) - yaw)
+        relative_yaw = yaw_of(tuple(orientation)) - yaw
         self._state = GraspState(left, right, opening, lift, self._steps)
 
         observation = np.zeros(OBS_DIM, dtype=np.float64)

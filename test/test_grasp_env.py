@@ -18,14 +18,16 @@ from sim_node.grasp_env import (
     OBS_FINGER_CONTACTS,
     OBS_GRIPPER_OPENING,
     OBS_GRIPPER_POSITION,
+    OBS_GRIPPER_YAW,
     OBS_OBJECT_LIFT,
     OBS_OBJECT_RELATIVE_POSITION,
+    OBS_OBJECT_RELATIVE_YAW,
     OBS_TASK,
     GraspEnv,
     GraspEnvConfig,
     GraspState,
 )
-from sim_node.panda_robot import JOINT_NAMES
+from sim_node.panda_robot import JOINT_NAMES, yaw_of
 from sim_node.scripted_grasp import GraspError, ScriptedGraspPolicy
 
 
@@ -103,6 +105,21 @@ def test_first_observation_describes_the_home_pose(make_env) -> None:
     tcp = observation[OBS_GRIPPER_POSITION] + (0.5, 0.0, 0.0)
     np.testing.assert_allclose(observation[OBS_OBJECT_RELATIVE_POSITION], position - tcp, atol=1e-6)
     assert position[2] == pytest.approx(0.025, abs=0.002)
+
+
+def test_the_object_yaw_shows_a_half_turn(make_env) -> None:
+    """The box is not round: turned by half a turn it is another grasp problem, and the policy sees it."""
+    env = make_env()
+    turns = []
+    for seed in range(6):
+        observation, _ = env.reset(seed=seed)
+        gripper_yaw = math.atan2(*observation[OBS_GRIPPER_YAW])
+        relative_yaw = yaw_of(tuple(env.object_pose()[1])) - gripper_yaw
+        np.testing.assert_allclose(observation[OBS_OBJECT_RELATIVE_YAW],
+                                   (math.sin(relative_yaw), math.cos(relative_yaw)), atol=1e-5)
+        turns.append(math.atan2(*observation[OBS_OBJECT_RELATIVE_YAW]))
+    # Random yaws over six resets: the feature reaches both halves of the turn.
+    assert max(turns) - min(turns) > math.pi
 
 
 def test_one_hot_follows_the_task(make_env) -> None:

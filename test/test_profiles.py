@@ -2,12 +2,15 @@
 defaults (shared/design/PAPER_LEARNER.md), ``glocal_ros`` as the project's default, how a goal of each starts,
 and that ``learner/evaluate``'s policy scores as a goal's check before its first step, on the same episodes."""
 
+import json
+
 import jax
 import numpy as np
 import pytest
 from flax.traverse_util import flatten_dict
 
 from glocal_ros.seeds import derived_seed
+from glocal_ros.spaces import OBSERVATION_LAYOUT
 from learner_node.evaluation import evaluate
 from learner_node.policies import PolicyRegistry
 from learner_node.policy_store import PolicyRecord, PolicyStore
@@ -147,6 +150,21 @@ def test_a_goal_refuses_a_policy_of_another_profile_naming_both(tmp_path, paper_
     with pytest.raises(ValueError, match="policy 'prior' was trained under learner profile 'glocal_ros', and this "
                                          "learner runs profile 'paper'"):
         trainer.train(TrainSpec("A0", "prior", "out", step_budget=10))
+
+
+def test_a_policy_of_an_older_observation_layout_is_refused_by_goals_and_evaluations(tmp_path, paper_store):
+    """A record written before layouts were recorded (no field) is of layout 1, whose yaw hid a half turn."""
+    record_file = paper_store.root / "new" / "policy.json"
+    record = json.loads(record_file.read_text())
+    assert record.pop("observation_layout") == OBSERVATION_LAYOUT
+    record_file.write_text(json.dumps(record))
+    policies = PolicyRegistry(paper_store)
+    trainer = Trainer(None, policies, tmp_path / "checkpoints", profile=PAPER)
+    message = f"policy 'new' was trained on observation layout 1, and the sim's is {OBSERVATION_LAYOUT}"
+    with pytest.raises(ValueError, match=message):
+        trainer.train(TrainSpec("A0", "new", "out", step_budget=10))
+    with pytest.raises(ValueError, match=message):
+        trainer.evaluation_policy("new", ["A0"])
 
 
 @pytest.mark.parametrize("profile, task", [("glocal_ros", "D3"), ("paper", "A0")])
