@@ -144,14 +144,18 @@ def _progress(stage: str, done: int, total: int) -> None:
 def cmd_assets_generate(args: argparse.Namespace) -> int:
     from functools import partial
 
-    from glocal_ros.objects import MeasuredGrid, generate_object_set
+    from glocal_ros.objects import GeneratorConfig, MeasuredGrid, generate_object_set
     from sim_node.scripted_grasp import grasp_trial
 
     shortlist = {} if args.per_column is None else {"per_column": args.per_column}
-    measured = None if args.grid == "geometric" else MeasuredGrid(
-        partial(grasp_trial, perturbed_episodes=args.perturbed_episodes), **shortlist)
+    measured = None
+    if args.grid == "measured":
+        measured = MeasuredGrid(partial(grasp_trial, perturbed_episodes=args.perturbed_episodes), **shortlist)
+    elif args.grid == "lifting-poses":
+        measured = MeasuredGrid(_lifting_pose_check(args).trial, letter_by="lifting poses", **shortlist)
     generate_object_set(args.out, seed=args.seed, candidates=args.candidates, workers=args.workers,
-                        progress=_progress, measured=measured, lifting_poses=_lifting_pose_check(args))
+                        progress=_progress, measured=measured, lifting_poses=_lifting_pose_check(args),
+                        config=GeneratorConfig(envelope=args.envelope))
     print(f"wrote {args.out}")
     return cmd_assets_check(args) if args.check_episodes else 0
 
@@ -508,11 +512,17 @@ def build_parser() -> argparse.ArgumentParser:
     generate.add_argument("--seed", type=int, default=0)
     generate.add_argument("--candidates", type=int, default=1500, help="candidate shapes to bin into the grid")
     generate.add_argument("--workers", type=int, default=2)
-    generate.add_argument("--grid", choices=("measured", "geometric"), default="measured",
-                          help="letters from grasps in the simulator, or from the geometric difficulty alone")
+    generate.add_argument("--grid", choices=("measured", "lifting-poses", "geometric"), default="measured",
+                          help="letters from the perturbed grasp in the simulator (measured), from the share of "
+                               "top-down poses that lift each candidate (lifting-poses, slower), or from the "
+                               "geometric difficulty alone")
     generate.add_argument("--per-column", type=_count(7), default=None,
-                          help="candidates of each complexity digit tried in the simulator (--grid measured; "
-                               "default: glocal_ros.objects.MeasuredGrid's)")
+                          help="candidates of each complexity digit tried in the simulator (--grid measured or "
+                               "lifting-poses; default: glocal_ros.objects.MeasuredGrid's)")
+    # glocal_ros.objects.cppn.ENVELOPES, named here: the object package takes a second to import.
+    generate.add_argument("--envelope", choices=("blob", "wide"), default="blob",
+                          help="base solids: EGAD-like blobs, or wide (blobs, slabs and rods, tapered; "
+                               "glocal_ros/objects/cppn.py)")
     generate.set_defaults(func=cmd_assets_generate)
     egad = asset_commands.add_parser("import-egad", help="the same layout from EGAD's A0.obj .. G6.obj")
     egad.add_argument("egad_dir", type=Path)

@@ -20,6 +20,7 @@ from glocal_ros.objects import (
     BadMeshError,
     GeneratorConfig,
     GridAssignmentError,
+    LiftingPoseCheck,
     MeasuredGrid,
     MissingEgadFilesError,
     ObjectSetMetadata,
@@ -32,10 +33,11 @@ from glocal_ros.objects import (
     sample_candidates,
 )
 from glocal_ros.objects.grid import assign_measured_grid, shortlist
-from glocal_ros.objects.meshing import prepare_for_gripper
+from glocal_ros.objects.meshing import field_to_mesh, prepare_for_gripper
 from glocal_ros.objects.metrics import angular_deficits
 from glocal_ros.objects.physics import VhacdConfig
-from glocal_ros.objects.pipeline import candidate_mesh
+from glocal_ros.objects.cppn import ENVELOPES, evaluate_field, sample_cppn, solid_bounds
+from glocal_ros.objects.pipeline import candidate_mesh, candidate_params
 from glocal_ros.objects.raycast import first_hits
 from glocal_ros.tasks import ALL_TASKS, grid_coordinates
 
@@ -166,6 +168,48 @@ def test_generate_object_set_writes_layout(small_set: tuple[Path, ObjectSetMetad
     assert params.to_dict() == a0.generator_params
 
 
+def _proportions(params) -> tuple[str, float]:
+    """("slab", "rod" or "blob", the taper) of a wide-envelope field's base solid."""
+    thin = sum(axis < 0.3 for axis in params.semi_axes)
+    return ("blob", "slab", "rod")[thin], params.taper
+
+
+def test_the_wide_envelope_adds_tapered_slabs_and_rods_and_the_blob_one_is_unchanged() -> None:
+    wide = [_proportions(candidate_params(5, index, replace(FAST, envelope="wide"))) for index in range(90)]
+    forms = [form for form, _ in wide]
+    assert all(forms.count(form) >= 20 for form in ("blob", "slab", "rod")), forms
+    assert all(taper != 0.0 for _, taper in wide) and max(abs(taper) for _, taper in wide) > 0.5
+    blobs = [candidate_params(5, index, FAST) for index in range(90)]
+    assert all(min(p.semi_axes) >= 0.35 and p.taper == 0.0 for p in blobs)
+    with pytest.raises(ValueError, match="unknown envelope 'flat': choose one of blob, wide"):
+        replace(FAST, envelope="flat")
+
+
+def test_a_wide_slab_stays_flat_and_its_taper_narrows_one_end_after_meshing() -> None:
+    """Knob 0 (no network perturbation): the base solid alone, as the generator meshes it."""
+    slab = next(params for params in (sample_cppn(np.random.default_rng(seed), 0.0, "wide") for seed in range(100))
+                if _proportions(params)[0] == "slab" and abs(params.taper) > 0.4)
+    lower, upper = solid_bounds(slab, FAST.coarse_resolution)
+    mesh = field_to_mesh(*evaluate_field(slab, 40, lower, upper))
+    visual, _ = prepare_for_gripper(mesh, mesh)
+    extents = np.sort(visual.extents)
+    assert extents[0] < 0.35 * extents[2], extents
+    # Cross-sections at a quarter and three quarters of the long axis (the field's x): the taper's
+    # narrow end is the one it names.
+    x, y = mesh.vertices[:, 0], mesh.vertices[:, 1]
+    lo, hi = x.min(), x.max()
+    widths = [np.ptp(y[np.abs(x - (lo + f * (hi - lo))) < 0.05 * (hi - lo)]) for f in (0.25, 0.75)]
+    narrow, wide = (widths[1], widths[0]) if slab.taper < 0 else (widths[0], widths[1])
+    assert narrow < 0.75 * wide, (slab.taper, widths)
+
+
+def test_the_generate_command_offers_every_envelope() -> None:
+    from glocal_app.cli import build_parser
+
+    for envelope in ENVELOPES:
+        assert build_parser().parse_args(["assets", "generate", "--envelope", envelope]).envelope == envelope
+
+
 def test_import_egad_builds_same_layout(tmp_path: Path) -> None:
     src = tmp_path / "egad"
     src.mkdir()
@@ -202,18 +246,36 @@ def test_import_egad_refuses_bad_meshes_and_leaves_the_output_as_it_was(tmp_path
         assert {entry.name for entry in tmp_path.iterdir()} == {"egad", "out"}, "a staging directory was left"
 
 
-def test_a_measured_grid_orders_letters_by_the_grasp_trial(tmp_path: Path) -> None:
-    def thinner_is_easier(objects: Path, task: str, seed: int) -> tuple[float, float]:
-        # A deterministic stand-in for the simulator's trial: success falls with the object's narrowest width.
-        width = min(np.ptp(_obj_vertices(objects / task / "visual.obj"), axis=0))
-        return float(np.clip(1.0 - width / 0.064, 0, 1)), 1.0
+def _thinner_is_easier(objects: Path, task: str, seed: int) -> tuple[float, float]:
+    # A deterministic stand-in for the simulator's trial: success falls with the object's narrowest width.
+    width = min(np.ptp(_obj_vertices(objects / task / "visual.obj"), axis=0))
+    return float(np.clip(1.0 - width / 0.064, 0, 1)), 1.0
 
+
+def test_a_measured_grid_orders_letters_by_the_grasp_trial(tmp_path: Path) -> None:
     metadata = generate_object_set(tmp_path, seed=3, candidates=70, config=FAST, tasks=["A2", "D2", "G2"],
-                                   measured=MeasuredGrid(thinner_is_easier, per_column=7), contact_sheet=False)
+                                   measured=MeasuredGrid(_thinner_is_easier, per_column=7), contact_sheet=False)
     success = [metadata.objects[task].perturbed_grasp_success for task in ("A2", "D2", "G2")]
     assert success[0] > success[1] > success[2]
     assert metadata.binning["per_column"] == 7 and len(metadata.binning["trials"]) == 49
+    assert metadata.binning["letter_by"] == "perturbed grasp"
     assert ObjectSetMetadata.load(tmp_path) == metadata
+
+
+def test_letters_by_lifting_poses_store_the_share_measured_on_the_written_objects(tmp_path: Path) -> None:
+    """The trial's numbers rank the shortlist; what objects.json stores of each object is the
+    ``LiftingPoseCheck``'s measurement of the written object, and no grasp success is made up."""
+    measured = MeasuredGrid(_thinner_is_easier, per_column=7, letter_by="lifting poses")
+    check = LiftingPoseCheck(lambda objects, task, seed: (0.5 if task == "A2" else 0.25, 1.0))
+    metadata = generate_object_set(tmp_path, seed=3, candidates=70, config=FAST, tasks=["A2", "G2"],
+                                   measured=measured, lifting_poses=check, contact_sheet=False)
+    assert metadata.binning["letter_by"] == "lifting poses"
+    assert "share of top-down poses that lift it" in metadata.binning["method"]
+    shares = {task: obj.lifting_pose_share for task, obj in metadata.objects.items()}
+    assert shares == {"A2": 0.5, "G2": 0.25}
+    assert all(obj.perturbed_grasp_success is None for obj in metadata.objects.values())
+    with pytest.raises(ValueError, match="unknown letter_by 'luck'"):
+        MeasuredGrid(_thinner_is_easier, letter_by="luck")
 
 
 def test_record_grasp_success(small_set: tuple[Path, ObjectSetMetadata], tmp_path: Path) -> None:
@@ -247,6 +309,14 @@ def test_committed_set_is_complete_and_small(committed: ObjectSetMetadata) -> No
     assert (ASSETS / "contact_sheet.png").is_file()
     raw = json.loads((ASSETS / "objects.json").read_text())
     assert raw["generator_version"] and raw["seed"] is not None
+
+
+def test_the_generator_still_draws_the_committed_objects(committed: ObjectSetMetadata) -> None:
+    config = GeneratorConfig(**{key: value for key, value in committed.config.items()
+                                if key in ("envelope",)})
+    for obj in committed.objects.values():
+        params = candidate_params(committed.seed, obj.candidate_index, config).to_dict()
+        assert {**params, **obj.generator_params} == params, obj.task
 
 
 def test_committed_grid_follows_metrics(committed: ObjectSetMetadata) -> None:

@@ -8,6 +8,16 @@ network perturbs a base superellipsoid, so that knob 0 gives a plain
 ellipsoid or rounded box and knob 1 gives the busy, lobed shapes of EGAD's
 high-complexity columns. The measured complexity, not the knob, places an
 object on the grid.
+
+The envelope sets the base solid's proportions. ``blob`` keeps every
+semi-axis within [0.35, 0.65] (aspect ratios under 1.9: what EGAD's
+generated objects mostly look like). ``wide`` adds what a top-down parallel
+gripper finds hard and EGAD's blobs never are: thirds of the candidates are
+blobs, slabs (one semi-axis 0.07..0.2, so flat objects that must be gripped
+low or at an edge) and rods (two semi-axes 0.1..0.25), and every one of them
+tapers along its long axis (``taper``: one end down to a quarter of the
+other's cross-section), which makes wedges, cones and heads away from the
+centre of mass.
 """
 
 from __future__ import annotations
@@ -25,8 +35,13 @@ ACTIVATIONS: tuple[str, ...] = ("sin", "gauss", "tanh", "abs")
 DOMAIN_HALF_WIDTH = 1.35
 _MIN_SEMI_AXIS = 0.35
 _MAX_SEMI_AXIS = 0.65
-# With r >= 1.35 / 0.65 on the border, amplitude < 1.07 keeps the field negative there.
+# With r >= 1.35 / 0.65 on the border, amplitude < 1.07 keeps the field negative there. A taper only
+# shrinks semi-axes, so it keeps that bound.
 _MAX_AMPLITUDE = 1.0
+ENVELOPES: tuple[str, ...] = ("blob", "wide")
+_SLAB_SEMI_AXIS = (0.07, 0.2)
+_ROD_SEMI_AXIS = (0.1, 0.25)
+_MAX_TAPER = 0.6
 
 
 @dataclass(frozen=True)
@@ -48,6 +63,8 @@ class CPPNParams:
     activations: tuple[tuple[str, ...], ...]
     output_weights: tuple[float, ...]
     output_bias: float
+    taper: float = 0.0
+    """Cross-sections along x scale by ``(1 + taper * x / a) / (1 + |taper|)`` (0: no taper)."""
 
     def to_dict(self) -> dict[str, Any]:
         """JSON-ready parameters (lists instead of tuples)."""
@@ -62,10 +79,13 @@ def _listify(value: Any) -> Any:
     return value
 
 
-def sample_cppn(rng: np.random.Generator, complexity_knob: float) -> CPPNParams:
-    """Draw a random field whose structural richness grows with ``complexity_knob``."""
+def sample_cppn(rng: np.random.Generator, complexity_knob: float, envelope: str = "blob") -> CPPNParams:
+    """Draw a random field whose structural richness grows with ``complexity_knob``, its base solid's
+    proportions from ``envelope`` (see the module's docstring)."""
+    if envelope not in ENVELOPES:
+        raise ValueError(f"unknown envelope {envelope!r}: choose one of {', '.join(ENVELOPES)}")
     k = float(np.clip(complexity_knob, 0.0, 1.0))
-    semi_axes = tuple(float(v) for v in rng.uniform(_MIN_SEMI_AXIS, _MAX_SEMI_AXIS, size=3))
+    semi_axes, taper = _base_proportions(rng, envelope)
     # p = 2 is an ellipsoid; larger p tends to a box, so simple shapes cover both.
     exponent = float(rng.choice([2.0, 2.0, 3.0, 4.0, 6.0, 8.0]))
     amplitude = float(_MAX_AMPLITUDE * k * rng.uniform(0.6, 1.0))
@@ -88,7 +108,7 @@ def sample_cppn(rng: np.random.Generator, complexity_knob: float) -> CPPNParams:
     # ``amplitude`` really sets the perturbation size: an unnormalised random
     # network is often saturated or flat, leaving a plain blob at any knob.
     axis = np.linspace(-DOMAIN_HALF_WIDTH, DOMAIN_HALF_WIDTH, 20)
-    inputs = _inputs(np.meshgrid(axis, axis, axis, indexing="ij"), semi_axes, exponent)
+    inputs = _inputs(np.meshgrid(axis, axis, axis, indexing="ij"), semi_axes, exponent, taper)
     inputs = inputs[inputs[:, 3] <= 1.0 + amplitude]
     net = _hidden(weights, biases, activations, inputs) @ raw_out
     gain = float(rng.uniform(1.0, 1.5))
@@ -104,7 +124,24 @@ def sample_cppn(rng: np.random.Generator, complexity_knob: float) -> CPPNParams:
         activations=tuple(activations),
         output_weights=tuple(output_weights),
         output_bias=round(float(-net.mean() * gain / std + rng.normal(0.0, 0.3)), 6),
+        taper=taper,
     )
+
+
+def _base_proportions(rng: np.random.Generator, envelope: str) -> tuple[tuple[float, float, float], float]:
+    """Semi-axes and taper of the base solid. ``blob`` draws exactly what the generator drew before
+    envelopes existed, so a seed still gives the same blob set."""
+    if envelope == "blob":
+        return tuple(float(v) for v in rng.uniform(_MIN_SEMI_AXIS, _MAX_SEMI_AXIS, size=3)), 0.0  # type: ignore
+    form = rng.integers(3)  # 0 blob, 1 slab, 2 rod
+    axes = rng.uniform(_MIN_SEMI_AXIS, _MAX_SEMI_AXIS, size=3)
+    axes[0] = _MAX_SEMI_AXIS  # the long axis, along which the taper runs
+    if form == 1:
+        axes[2] = rng.uniform(*_SLAB_SEMI_AXIS)
+    elif form == 2:
+        axes[1:] = rng.uniform(*_ROD_SEMI_AXIS, size=2)
+    taper = round(float(rng.uniform(-_MAX_TAPER, _MAX_TAPER)), 6)
+    return tuple(round(float(v), 6) for v in axes), taper  # type: ignore[return-value]
 
 
 def _round(values: np.ndarray) -> list:
@@ -124,10 +161,13 @@ def _activate(name: str, x: np.ndarray) -> np.ndarray:
     raise ValueError(f"unknown activation {name!r}")
 
 
-def _inputs(grid: list[np.ndarray], semi_axes: Sequence[float], exponent: float) -> np.ndarray:
-    """(N, 4) network inputs x, y, z and the superellipsoid radius r."""
+def _inputs(grid: list[np.ndarray], semi_axes: Sequence[float], exponent: float, taper: float = 0.0) -> np.ndarray:
+    """(N, 4) network inputs x, y, z and the (tapered) superellipsoid radius r."""
     x, y, z = (g.ravel() for g in grid)
     a, b, c = semi_axes
+    if taper:
+        section = (1.0 + taper * np.clip(x / a, -1.0, 1.0)) / (1.0 + abs(taper))
+        b, c = b * section, c * section
     r = (np.abs(x / a) ** exponent + np.abs(y / b) ** exponent + np.abs(z / c) ** exponent) ** (1.0 / exponent)
     return np.stack([x, y, z, r], axis=1)
 
@@ -165,7 +205,7 @@ def evaluate_field(
     spacing = float((hi - lo).max()) / (resolution - 1)
     axes = [lo[i] + spacing * np.arange(int(np.ceil((hi[i] - lo[i]) / spacing - 1e-9)) + 1) for i in range(3)]
     grid = np.meshgrid(*axes, indexing="ij")
-    inputs = _inputs(grid, params.semi_axes, params.exponent)
+    inputs = _inputs(grid, params.semi_axes, params.exponent, params.taper)
     hidden = _hidden(params.weights, params.biases, params.activations, inputs)
     out = np.tanh(hidden @ np.asarray(params.output_weights) + params.output_bias)
     field = (1.0 - inputs[:, 3]) + params.amplitude * out

@@ -19,15 +19,25 @@ BINNING_METHOD = (
 )
 
 
-MEASURED_BINNING_METHOD = (
-    "digit: complexity septile over all valid candidates, as for the geometric grid; "
-    "letter: within each digit, a shortlist of candidates evenly spaced in geometric "
-    "difficulty is built and grasped in the simulator; among those the scripted grasp "
-    "lifts reliably, row r takes the candidate whose perturbed-grasp success is nearest "
-    "to the r-th of 7 values evenly spaced from the column's highest success (A) to its "
-    "lowest (G). Evenly spaced values rather than order statistics: a column whose "
-    "shortlist crowds at one end still gets its easiest and its hardest object."
-)
+#: What a measured grid's letters can follow: the measure's name and when a candidate counts as usable.
+LETTER_MEASURES: dict[str, tuple[str, str]] = {
+    "perturbed grasp": ("perturbed-grasp success", "the scripted grasp lifts reliably"),
+    "lifting poses": ("share of top-down poses that lift it", "the best of those poses lifts reliably"),
+}
+
+
+def measured_binning_method(letter_by: str = "perturbed grasp") -> str:
+    """How ``assign_measured_grid`` places candidates, when its letters follow ``letter_by``."""
+    measure, usable = LETTER_MEASURES[letter_by]
+    return (
+        "digit: complexity septile over all valid candidates, as for the geometric grid; "
+        "letter: within each digit, a shortlist of candidates evenly spaced in geometric "
+        f"difficulty is built and measured in the simulator; among those {usable}, row r "
+        f"takes the candidate whose {measure} is nearest to the r-th of 7 values evenly spaced "
+        "from the column's highest (A) to its lowest (G). Evenly spaced values rather than "
+        "order statistics: a column whose shortlist crowds at one end still gets its easiest "
+        "and its hardest object."
+    )
 
 
 class GridAssignmentError(ValueError):
@@ -78,7 +88,7 @@ def shortlist(complexity: Sequence[float], difficulty: Sequence[float],
 
 def assign_measured_grid(columns: Mapping[str, Sequence[int]], success: Mapping[int, float],
                          complexity_edges: Sequence[float]) -> GridAssignment:
-    """Letters from success measured in the simulator (see ``MEASURED_BINNING_METHOD``).
+    """Letters from success measured in the simulator (see ``measured_binning_method``).
 
     ``columns``: each digit's measured candidates; ``success``: each usable candidate's perturbed-grasp
     success (candidates missing from it are left out). Raises ``GridAssignmentError`` if a column has

@@ -31,12 +31,13 @@ from typing import Callable, Iterator, Optional, Sequence
 import numpy as np
 import trimesh
 
-from glocal_ros.objects.cppn import CPPNParams, evaluate_field, sample_cppn, solid_bounds
+from glocal_ros.objects.cppn import ENVELOPES, CPPNParams, evaluate_field, sample_cppn, solid_bounds
 from glocal_ros.objects.grid import (
     BINNING_METHOD,
-    MEASURED_BINNING_METHOD,
+    LETTER_MEASURES,
     assign_grid,
     assign_measured_grid,
+    measured_binning_method,
     shortlist,
 )
 from glocal_ros.objects.meshing import (
@@ -89,16 +90,23 @@ MIN_BEST_POSE_SUCCESS = 0.8
 
 @dataclass(frozen=True)
 class MeasuredGrid:
-    """Letters from grasps in the simulator (``grid.MEASURED_BINNING_METHOD``).
+    """Letters from grasps in the simulator (``grid.measured_binning_method``).
 
-    ``per_column`` candidates of each complexity digit are built and tried;
-    those whose scripted grasp succeeds less than ``min_scripted_success``
-    never enter the grid, so every object stays graspable.
+    ``per_column`` candidates of each complexity digit are built and tried by ``grasp_trial``, which
+    gives (the measure the letters follow, whether the candidate can be grasped) as ``letter_by`` says:
+    (perturbed-grasp success, scripted-grasp success) for ``"perturbed grasp"``, (share of lifting
+    poses, the best pose's success) for ``"lifting poses"`` (``LiftingPoseTrial``). Those whose second
+    number is below ``min_scripted_success`` never enter the grid, so every object stays graspable.
     """
 
     grasp_trial: GraspTrial
     per_column: int = 32
     min_scripted_success: float = 0.8
+    letter_by: str = "perturbed grasp"
+
+    def __post_init__(self) -> None:
+        if self.letter_by not in LETTER_MEASURES:
+            raise ValueError(f"unknown letter_by {self.letter_by!r}: choose one of {', '.join(LETTER_MEASURES)}")
 
 
 @dataclass(frozen=True)
@@ -140,6 +148,12 @@ class GeneratorConfig:
     mass: MassConfig = field(default_factory=MassConfig)
     friction: FrictionConfig = field(default_factory=FrictionConfig)
     vhacd: VhacdConfig = field(default_factory=VhacdConfig)
+    envelope: str = "blob"
+    """The base solids' proportions (``glocal_ros.objects.cppn.ENVELOPES``)."""
+
+    def __post_init__(self) -> None:
+        if self.envelope not in ENVELOPES:
+            raise ValueError(f"unknown envelope {self.envelope!r}: choose one of {', '.join(ENVELOPES)}")
 
     def to_dict(self) -> dict:
         out = asdict(self)
@@ -184,15 +198,20 @@ def _candidate_rngs(seed: int, index: int) -> tuple[np.random.Generator, np.rand
     return np.random.default_rng([seed, index, 0]), np.random.default_rng([seed, index, 1])
 
 
+def candidate_params(seed: int, index: int, config: GeneratorConfig) -> CPPNParams:
+    """The CPPN of candidate ``index`` of the pool seeded by ``seed``."""
+    shape_rng, _ = _candidate_rngs(seed, index)
+    # Square root skews knobs upward: low knobs all give similar plain blobs,
+    # the complex end needs more draws to populate its columns.
+    return sample_cppn(shape_rng, float(shape_rng.random()) ** 0.5, config.envelope)
+
+
 def candidate_mesh(seed: int, index: int, config: GeneratorConfig) -> tuple[CPPNParams, trimesh.Trimesh]:
     """The CPPN and marching-cubes mesh of candidate ``index`` of the pool seeded by ``seed``.
 
     Raises :class:`EmptyFieldError` if the field has no usable solid.
     """
-    shape_rng, _ = _candidate_rngs(seed, index)
-    # Square root skews knobs upward: low knobs all give similar plain blobs,
-    # the complex end needs more draws to populate its columns.
-    params = sample_cppn(shape_rng, float(shape_rng.random()) ** 0.5)
+    params = candidate_params(seed, index, config)
     lower, upper = solid_bounds(params, config.coarse_resolution)
     field_values, spacing = evaluate_field(params, config.resolution, lower, upper)
     return params, field_to_mesh(field_values, spacing)
@@ -420,8 +439,8 @@ def generate_object_set(
             success = {i: trials[valid[i].index][0] for members in columns.values() for i in members
                        if trials[valid[i].index][1] >= measured.min_scripted_success}
             grid = assign_measured_grid(columns, success, edges)
-            binning = {"method": MEASURED_BINNING_METHOD, "per_column": measured.per_column,
-                       "min_scripted_success": measured.min_scripted_success,
+            binning = {"method": measured_binning_method(measured.letter_by), "letter_by": measured.letter_by,
+                       "per_column": measured.per_column, "min_scripted_success": measured.min_scripted_success,
                        "trials": {str(index): list(rates) for index, rates in sorted(trials.items())}}
         metadata = ObjectSetMetadata(
             generator_version=GENERATOR_VERSION,
@@ -435,7 +454,9 @@ def generate_object_set(
         for done, task in enumerate(chosen_tasks, start=1):
             index = valid[grid.cells[task]].index
             params, mesh = candidate_mesh(seed, index, config)
-            perturbed, scripted = trials.get(index, (None, None))
+            grasps = {"perturbed_grasp_success": None, "scripted_grasp_success": None}
+            if measured is not None and measured.letter_by == "perturbed grasp":
+                grasps = dict(zip(grasps, trials[index]))
             metadata.objects[task] = _write_object(
                 task,
                 _measure(mesh, _candidate_rngs(seed, index)[1], config),
@@ -445,8 +466,7 @@ def generate_object_set(
                 seed=seed,
                 candidate_index=index,
                 generator_params=params.to_dict(),
-                perturbed_grasp_success=perturbed,
-                scripted_grasp_success=scripted,
+                **grasps,
             )
             if progress:
                 progress("objects", done, len(chosen_tasks))
