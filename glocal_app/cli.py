@@ -363,8 +363,8 @@ def cmd_bench_cost(args: argparse.Namespace) -> int:
     tasks = select_tasks(args.tasks)
     command = "glocal-ros " + " ".join(sys.argv[1:])
     if args.tabulate:
-        check_cost(tasks, args.seeds, settings, args.jobs, args.profile)
-        held = finished_goals(args.work_dir, settings, args.profile)
+        check_cost(tasks, args.seeds, settings, args.jobs, args.profile, args.prior_store)
+        held = finished_goals(args.work_dir, settings, args.profile, args.prior_store)
         goals = [held[(task, seed)] for task in tasks for seed in args.seeds if (task, seed) in held]
         if not goals:
             print(f"bench cost --tabulate: no finished goal of these tasks and seeds in {args.work_dir / GOALS_FILE}",
@@ -372,7 +372,8 @@ def cmd_bench_cost(args: argparse.Namespace) -> int:
             return 1
     else:
         try:
-            goals = run_cost_map(tasks, args.seeds, settings, args.work_dir, args.jobs, args.profile)
+            goals = run_cost_map(tasks, args.seeds, settings, args.work_dir, args.jobs, args.profile,
+                                 prior_store=args.prior_store)
         except KeyboardInterrupt:
             print(f"bench cost: interrupted; the finished goals are kept in {args.work_dir / GOALS_FILE}: the same "
                   "command resumes", file=sys.stderr)
@@ -430,9 +431,10 @@ def cmd_train_prior(args: argparse.Namespace) -> int:
             bar.set_postfix(success=f"{success_rate:.0%}")
             bar.refresh()
 
-    model = train_prior(lambda: GraspEnv(config.task), ScriptedGraspPolicy().act, work_dir, config, progress)
+    model = train_prior(lambda: GraspEnv(config.task, args.objects_dir), ScriptedGraspPolicy().act, work_dir, config,
+                        progress)
     bar.close()
-    batch = BatchedEnvs(lambda i: GraspEnv(config.task), 2, config.task)
+    batch = BatchedEnvs(lambda i: GraspEnv(config.task, args.objects_dir), 2, config.task)
     try:
         (score,) = evaluate(batch, lambda obs: model.predict(obs, deterministic=True)[0], [config.task],
                             args.eval_episodes, policy_name=args.name, seed=args.seed + 1)
@@ -443,7 +445,8 @@ def cmd_train_prior(args: argparse.Namespace) -> int:
                           last_score=float(score.successes), last_score_task=config.task,
                           profile=config.profile,
                           extra={"eval_episodes": score.episodes, "demo_episodes": config.demo_episodes,
-                                 "seed": config.seed, "network": config.network or profile.network})
+                                 "seed": config.seed, "network": config.network or profile.network,
+                                 **({"objects_dir": str(args.objects_dir)} if args.objects_dir else {})})
     PolicyStore(args.out).save(model, record, recent_experience(model.replay_buffer, EXPERIENCE_TRANSITIONS))
     print(f"stored in {args.out}/{args.name}")
     threshold = paper_threshold(score.episodes) if args.threshold is None else args.threshold
@@ -646,6 +649,9 @@ def build_parser() -> argparse.ArgumentParser:
     bench_cost.add_argument("--objects-dir", type=Path, default=None, metavar="DIR",
                             help="the object set to map, in the layout `assets generate` writes (default: the "
                                  "shipped one)")
+    bench_cost.add_argument("--prior-store", type=Path, default=None, metavar="DIR",
+                            help="a policy store searched for the prior before the profile's shipped one "
+                                 "(train-prior --out; for a set of another A0)")
     bench_cost.add_argument("--work-dir", type=Path, default=cost_bench.DEFAULT_WORK_DIR,
                             help="where each goal is kept as it finishes (goals.jsonl), for the same command to "
                                  f"skip (default: {cost_bench.DEFAULT_WORK_DIR})")
@@ -686,6 +692,8 @@ def build_parser() -> argparse.ArgumentParser:
                        help="policy store (default: the profile's shipped priors, assets/priors for glocal_ros)")
     prior.add_argument("--name", default="prior", help="the policy's name in the store")
     add_profile_argument(prior)
+    prior.add_argument("--objects-dir", type=Path, default=None, metavar="DIR",
+                       help="the object set whose A0 it trains on (default: the shipped one)")
     prior.add_argument("--network", default="", choices=list(NETWORKS),
                        help="hidden layers and batch of the new model (learner_node/sac_settings.py), where the "
                             "profile allows a choice (default: the profile's)")
@@ -735,6 +743,8 @@ def main(argv: list[str] | None = None) -> int:
         parser.error("assets check: --check-episodes must be at least 1")
     if args.command == "train-prior" and not 0 <= args.min_steps <= args.steps:
         parser.error(f"train-prior: --min-steps {args.min_steps} must lie between 0 and --steps {args.steps}")
+    if args.command == "train-prior" and args.objects_dir and not (args.objects_dir / "A0" / "model.urdf").is_file():
+        parser.error(f"train-prior: {args.objects_dir} holds no A0/model.urdf (the layout `assets generate` writes)")
     if args.command == "collect-experience" and args.store is None:
         args.store = assets_dir() / "priors"
     try:

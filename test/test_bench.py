@@ -343,6 +343,24 @@ def test_the_goal_log_drops_a_torn_line_and_refuses_other_settings(tmp_path):
         finished_goals(tmp_path, settings)
 
 
+def test_a_cost_map_from_another_prior_store_is_another_map(tmp_path):
+    """A set of another A0 needs a prior trained on it (``train-prior --objects-dir``): the key names the
+    prior the goals start from, so goals from the shipped prior are refused in a map from another."""
+    from glocal_app.benches.cost import GoalLog, cost_settings, finished_goals, goal_record, object_fingerprint, run_key
+
+    store = tmp_path / "priors"
+    PolicyStore(store).add_copy(PolicyStore(assets_dir() / "priors"), "prior", "prior")
+    updated = PolicyStore(store).update("prior", last_score=1.0).updated  # now: not the shipped prior's time
+    settings = cost_settings(step_budget=2000)
+    shipped, other = run_key(settings), run_key(settings, prior_store=store)
+    assert other["prior"] == f"prior (model-1.zip, {updated})" != shipped["prior"]
+    (tmp_path / "work").mkdir()
+    GoalLog(tmp_path / "work").append(goal_record(cost_goal("A1", 0, 0, cap=2000), shipped, object_fingerprint("A1")))
+    assert list(finished_goals(tmp_path / "work", settings)) == [("A1", 0)]
+    with pytest.raises(ValueError, match=r"other settings \(prior prior \(model-1.zip"):
+        finished_goals(tmp_path / "work", settings, prior_store=store)
+
+
 def test_bench_cost_runs_real_goals_stopped_at_b_resumes_and_tabulates(tmp_path, capsys, monkeypatch):
     """Real goals (PyBullet, SAC) through the command, tiny: the paper profile's prior (trained on A0, raw task
     inputs elsewhere), a cap of 16 steps scored every 8 over 2 episodes. One task, then the same work dir with a
@@ -409,6 +427,7 @@ def test_bench_cost_runs_real_goals_stopped_at_b_resumes_and_tabulates(tmp_path,
     (["--seeds", "1,1"], "must not repeat"),
     (["--jobs", "0"], "at least one job"),
     (["--tabulate", "--step-budget", "1500"], "divide the budget"),
+    (["--prior-store", "/no/such/store"], "is not a directory"),
 ])
 def test_bench_cost_refuses_bad_input_before_anything_runs(tmp_path, capsys, args, message):
     from glocal_app.cli import main

@@ -64,3 +64,9 @@ def test_train_prior_refuses_a_minimum_above_its_budget_before_training():
     result = run_cli("train-prior", "--min-steps", "5000", "--steps", "3000")
     assert result.returncode == 2 and "--min-steps 5000 must lie between 0 and --steps 3000" in result.stderr
     assert "Traceback" not in result.stderr
+
+
+def test_train_prior_refuses_an_objects_dir_without_a0_before_training(tmp_path):
+    result = run_cli("train-prior", "--objects-dir", str(tmp_path), "--out", str(tmp_path / "priors"))
+    assert result.returncode == 2 and f"{tmp_path} holds no A0/model.urdf" in result.stderr
+    assert "Traceback" not in result.stderr and not (tmp_path / "priors").exists()

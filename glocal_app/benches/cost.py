@@ -153,16 +153,17 @@ def cost_settings(step_budget: int = DEFAULT_STEP_BUDGET, eval_interval: int = D
 
 
 def check_cost(tasks: Sequence[str], seeds: Sequence[int], settings: TransferSettings, jobs: int,
-               profile: str = DEFAULT_PROFILE) -> None:
+               profile: str = DEFAULT_PROFILE, prior_store: Path | None = None) -> None:
     """``ValueError`` for anything that would fail later, before any goal runs."""
     if not settings.stop_at_threshold:
         raise ValueError("a cost map's goals stop at B: use cost_settings")
-    check_goals([PROFILE_RECIPE], [INITIAL_POLICY], None, tasks, seeds, settings, jobs, [profile])
+    check_goals([PROFILE_RECIPE], [INITIAL_POLICY], prior_store, tasks, seeds, settings, jobs, [profile])
 
 
-def run_key(settings: TransferSettings, profile: str = DEFAULT_PROFILE) -> dict:
-    """What, besides its task and seed, decides a goal: a goal of another key is not this map's."""
-    store = next(store for store in prior_stores(None, profile) if INITIAL_POLICY in store)
+def run_key(settings: TransferSettings, profile: str = DEFAULT_PROFILE, prior_store: Path | None = None) -> dict:
+    """What, besides its task and seed, decides a goal: a goal of another key is not this map's. The prior
+    comes from ``prior_store`` when it holds one (``bench transfer``'s ``prior_stores``)."""
+    store = next(store for store in prior_stores(prior_store, profile) if INITIAL_POLICY in store)
     record = store.record(INITIAL_POLICY)
     return {"step_budget": settings.step_budget, "eval_interval": settings.eval_interval,
             "eval_episodes": settings.eval_episodes, "threshold": settings.threshold,
@@ -225,12 +226,12 @@ def goal_record(goal: TransferGoal, key: dict, fingerprint: str) -> dict:
             "wall_s": round(goal.wall_s, 2), "key": key, "object": fingerprint}
 
 
-def finished_goals(work_dir: Path, settings: TransferSettings, profile: str = DEFAULT_PROFILE
-                   ) -> dict[tuple[str, int], TransferGoal]:
+def finished_goals(work_dir: Path, settings: TransferSettings, profile: str = DEFAULT_PROFILE,
+                   prior_store: Path | None = None) -> dict[tuple[str, int], TransferGoal]:
     """The goals ``work_dir`` holds, by (task, seed); ``ValueError`` when any is of other settings or of an
     object that has changed since."""
     log = GoalLog(work_dir)
-    key, goals, fingerprints = run_key(settings, profile), {}, {}
+    key, goals, fingerprints = run_key(settings, profile, prior_store), {}, {}
     for number, record in enumerate(log.records(), 1):
         if record.get("key") != key:
             theirs = record.get("key") or {}
@@ -272,35 +273,35 @@ def run_order(tasks: Sequence[str], seeds: Sequence[int]) -> list[tuple[str, int
 
 
 def run_cost_map(tasks: Sequence[str], seeds: Sequence[int], settings: TransferSettings, work_dir: Path,
-                 jobs: int, profile: str = DEFAULT_PROFILE, log: Callable[[str], None] = print
-                 ) -> list[TransferGoal]:
+                 jobs: int, profile: str = DEFAULT_PROFILE, log: Callable[[str], None] = print,
+                 prior_store: Path | None = None) -> list[TransferGoal]:
     """Every (task, seed) goal that ``work_dir`` does not hold yet, ``jobs`` at a time, each appended to it as
     it finishes; then every goal of the selection, in grid order, each object's seeds together."""
-    check_cost(tasks, seeds, settings, jobs, profile)
-    finished_goals(work_dir, settings, profile)  # refuse a work dir of other settings before creating anything
+    check_cost(tasks, seeds, settings, jobs, profile, prior_store)
+    finished_goals(work_dir, settings, profile, prior_store)  # refuse a work dir of other settings before creating anything
     with work_lock(work_dir):
         goal_log = GoalLog(work_dir)
         goal_log.drop_torn_line()
-        done = finished_goals(work_dir, settings, profile)
+        done = finished_goals(work_dir, settings, profile, prior_store)
         selection = run_order(tasks, seeds)
         pending = [goal for goal in selection if goal not in done]
         log(f"bench cost: {len(selection) - len(pending)} of {len(selection)} goals finished before "
             f"(in {goal_log.path}), {len(pending)} to run, {min(jobs, len(pending))} at a time")
         if pending:
-            key = run_key(settings, profile)
+            key = run_key(settings, profile, prior_store)
             fingerprints = {task: object_fingerprint(task, settings.objects_dir)
                             for task in {task for task, _ in pending}}
-            _run_pending(pending, settings, jobs, profile, done, goal_log, key, fingerprints, log)
+            _run_pending(pending, settings, jobs, profile, prior_store, done, goal_log, key, fingerprints, log)
     return [done[(task, seed)] for task, seed in _grid_order(tasks, seeds)]
 
 
 def _run_pending(pending: list[tuple[str, int]], settings: TransferSettings, jobs: int, profile: str,
-                 done: dict[tuple[str, int], TransferGoal], goal_log: GoalLog, key: dict, fingerprints: dict[str, str],
+                 prior_store: Path | None, done: dict[tuple[str, int], TransferGoal], goal_log: GoalLog, key: dict, fingerprints: dict[str, str],
                  log: Callable[[str], None]) -> None:
     """Run ``pending`` in spawned workers, appending each goal to ``goal_log`` and ``done`` as it finishes."""
     # Spawned workers: pybullet, torch and JAX do not survive a fork of a process that uses them.
     with ProcessPoolExecutor(max_workers=min(jobs, len(pending)), mp_context=get_context("spawn")) as pool:
-        futures = {pool.submit(run_goal, PROFILE_RECIPE, INITIAL_POLICY, task, seed, settings, None, profile):
+        futures = {pool.submit(run_goal, PROFILE_RECIPE, INITIAL_POLICY, task, seed, settings, prior_store, profile):
                    (task, seed) for task, seed in pending}
         failed: list[tuple[tuple[str, int], Exception]] = []
         finished = 0
