@@ -278,7 +278,8 @@ def run_cost_map(tasks: Sequence[str], seeds: Sequence[int], settings: TransferS
     """Every (task, seed) goal that ``work_dir`` does not hold yet, ``jobs`` at a time, each appended to it as
     it finishes; then every goal of the selection, in grid order, each object's seeds together."""
     check_cost(tasks, seeds, settings, jobs, profile, prior_store)
-    finished_goals(work_dir, settings, profile, prior_store)  # refuse a work dir of other settings before creating anything
+    # A work dir of other settings is refused before anything is created in it.
+    finished_goals(work_dir, settings, profile, prior_store)
     with work_lock(work_dir):
         goal_log = GoalLog(work_dir)
         goal_log.drop_torn_line()
@@ -296,8 +297,8 @@ def run_cost_map(tasks: Sequence[str], seeds: Sequence[int], settings: TransferS
 
 
 def _run_pending(pending: list[tuple[str, int]], settings: TransferSettings, jobs: int, profile: str,
-                 prior_store: Path | None, done: dict[tuple[str, int], TransferGoal], goal_log: GoalLog, key: dict, fingerprints: dict[str, str],
-                 log: Callable[[str], None]) -> None:
+                 prior_store: Path | None, done: dict[tuple[str, int], TransferGoal], goal_log: GoalLog, key: dict,
+                 fingerprints: dict[str, str], log: Callable[[str], None]) -> None:
     """Run ``pending`` in spawned workers, appending each goal to ``goal_log`` and ``done`` as it finishes."""
     # Spawned workers: pybullet, torch and JAX do not survive a fork of a process that uses them.
     with ProcessPoolExecutor(max_workers=min(jobs, len(pending)), mp_context=get_context("spawn")) as pool:
