@@ -276,6 +276,23 @@ def cmd_assets_validate(args: argparse.Namespace) -> int:
     return write_bench_report(validation_report(measures, command, preamble), args.report)
 
 
+def cmd_bench_stones(args: argparse.Namespace) -> int:
+    """Steps to B on hard objects from the policy that learned the row above (``glocal_app.benches.stones``)."""
+    from glocal_app.benches.cost import GOALS_FILE, cost_settings
+    from glocal_app.benches.stones import STONES_FILE, run_stones, stones_report
+
+    settings = cost_settings(args.step_budget, args.eval_interval, args.eval_episodes, args.envs, args.objects_dir)
+    try:
+        direct, chains = run_stones(parse_task_list(args.targets), args.seeds, settings, args.work_dir, args.jobs,
+                                    args.profile, args.prior_store)
+    except KeyboardInterrupt:
+        print(f"bench stones: interrupted; what finished is kept in {args.work_dir / GOALS_FILE} and "
+              f"{args.work_dir / STONES_FILE}: the same command resumes", file=sys.stderr)
+        return 130
+    command = "glocal-ros " + " ".join(sys.argv[1:])
+    return write_bench_report(stones_report(direct, chains, command, settings, args.work_dir), args.out)
+
+
 def write_bench_report(report: str, out: Path) -> int:
     """Show a bench's report and write it to ``out`` (with the command that made it, inside)."""
     out.parent.mkdir(parents=True, exist_ok=True)
@@ -488,6 +505,32 @@ def _add_rate_arguments(parser: argparse.ArgumentParser, envs: str, steps: int) 
     parser.add_argument("--rounds", type=int, default=3, help="alternating rounds; the median is reported")
 
 
+def _add_cost_goal_arguments(command: argparse.ArgumentParser, default_envs: int) -> None:
+    """What decides a cost map's goals, and where they are kept: ``bench cost``'s and ``bench stones``'."""
+    command.add_argument("--seeds", type=_seed_list, default=list(cost_bench.DEFAULT_SEEDS),
+                         help=f"comma-separated goal seeds (default: {','.join(map(str, cost_bench.DEFAULT_SEEDS))})")
+    command.add_argument("--step-budget", type=int, default=cost_bench.DEFAULT_STEP_BUDGET, metavar="STEPS",
+                         help=f"the cap: training steps of a goal that does not pass B (default: "
+                              f"{cost_bench.DEFAULT_STEP_BUDGET})")
+    command.add_argument("--eval-interval", type=int, default=cost_bench.DEFAULT_EVAL_INTERVAL, metavar="STEPS",
+                         help=f"training steps between evaluations (default: {cost_bench.DEFAULT_EVAL_INTERVAL})")
+    command.add_argument("--eval-episodes", type=int, default=cost_bench.DEFAULT_EVAL_EPISODES,
+                         help=f"episodes per evaluation, S-bar; B is 0.75 of them (default: the paper's "
+                              f"{cost_bench.DEFAULT_EVAL_EPISODES})")
+    command.add_argument("--envs", type=int, default=default_envs, help=f"envs N per goal (default: {default_envs})")
+    command.add_argument("--jobs", type=int, default=os.cpu_count() or 1,
+                         help="goals run at a time (default: one per core)")
+    add_profile_argument(command)
+    command.add_argument("--objects-dir", type=Path, default=None, metavar="DIR",
+                         help="the object set to map, in the layout `assets generate` writes (default: the shipped one)")
+    command.add_argument("--prior-store", type=Path, default=None, metavar="DIR",
+                         help="a policy store searched for the prior before the profile's shipped one "
+                              "(train-prior --out; for a set of another A0)")
+    command.add_argument("--work-dir", type=Path, default=cost_bench.DEFAULT_WORK_DIR,
+                         help="where each goal is kept as it finishes (goals.jsonl), for the same command to "
+                              f"skip (default: {cost_bench.DEFAULT_WORK_DIR})")
+
+
 def build_parser() -> argparse.ArgumentParser:
     from glocal_ros.analysis.report import add_report_command
 
@@ -630,37 +673,21 @@ def build_parser() -> argparse.ArgumentParser:
     bench_cost.add_argument("--tasks", default=cost_bench.DEFAULT_TASKS,
                             help=f"all, per-row:K (K objects per row, every column covered), or comma-separated "
                                  f"tasks (default: {cost_bench.DEFAULT_TASKS})")
-    bench_cost.add_argument("--seeds", type=_seed_list, default=list(cost_bench.DEFAULT_SEEDS),
-                            help="comma-separated goal seeds (default: "
-                                 f"{','.join(map(str, cost_bench.DEFAULT_SEEDS))})")
-    bench_cost.add_argument("--step-budget", type=int, default=cost_bench.DEFAULT_STEP_BUDGET, metavar="STEPS",
-                            help=f"the cap: training steps of a goal that does not pass B (default: "
-                                 f"{cost_bench.DEFAULT_STEP_BUDGET})")
-    bench_cost.add_argument("--eval-interval", type=int, default=cost_bench.DEFAULT_EVAL_INTERVAL, metavar="STEPS",
-                            help=f"training steps between evaluations (default: {cost_bench.DEFAULT_EVAL_INTERVAL})")
-    bench_cost.add_argument("--eval-episodes", type=int, default=cost_bench.DEFAULT_EVAL_EPISODES,
-                            help=f"episodes per evaluation, S-bar; B is 0.75 of them (default: the paper's "
-                                 f"{cost_bench.DEFAULT_EVAL_EPISODES})")
-    bench_cost.add_argument("--envs", type=int, default=transfer_defaults.num_envs,
-                            help=f"envs N per goal (default: {transfer_defaults.num_envs})")
-    bench_cost.add_argument("--jobs", type=int, default=os.cpu_count() or 1,
-                            help="goals run at a time (default: one per core)")
-    add_profile_argument(bench_cost)
-    bench_cost.add_argument("--objects-dir", type=Path, default=None, metavar="DIR",
-                            help="the object set to map, in the layout `assets generate` writes (default: the "
-                                 "shipped one)")
-    bench_cost.add_argument("--prior-store", type=Path, default=None, metavar="DIR",
-                            help="a policy store searched for the prior before the profile's shipped one "
-                                 "(train-prior --out; for a set of another A0)")
-    bench_cost.add_argument("--work-dir", type=Path, default=cost_bench.DEFAULT_WORK_DIR,
-                            help="where each goal is kept as it finishes (goals.jsonl), for the same command to "
-                                 f"skip (default: {cost_bench.DEFAULT_WORK_DIR})")
+    _add_cost_goal_arguments(bench_cost, transfer_defaults.num_envs)
     bench_cost.add_argument("--tabulate", action="store_true",
                             help="run nothing: report the goals of these tasks and seeds that --work-dir holds "
                                  "(same settings)")
     bench_cost.add_argument("--out", type=Path, default=cost_bench.DEFAULT_REPORT,
                             help="the report; the heat map is written beside it as .png")
     bench_cost.set_defaults(func=cmd_bench_cost)
+    bench_stones = bench_commands.add_parser(
+        "stones", help="steps to B on each target from the policy that learned the object of the row above, "
+        "against from the prior, in a cost map's work directory (resumable)")
+    bench_stones.add_argument("--targets", default="G0,G1,G2,G3,G4,G5,G6",
+                              help="comma-separated objects, none in row A (default: row G)")
+    _add_cost_goal_arguments(bench_stones, transfer_defaults.num_envs)
+    bench_stones.add_argument("--out", type=Path, default=Path("bench/results/stones.md"), help="the report")
+    bench_stones.set_defaults(func=cmd_bench_stones)
 
     bench_curriculum = bench_commands.add_parser(
         "curriculum", help="the paper's comparison: strategies x seeds at one training budget through the graph "

@@ -418,6 +418,51 @@ def test_bench_cost_runs_real_goals_stopped_at_b_resumes_and_tabulates(tmp_path,
     assert "no finished goal of these tasks and seeds" in capsys.readouterr().err
 
 
+def test_a_stepping_stone_is_the_object_of_the_row_above_and_ratios_say_what_they_can():
+    from glocal_app.benches.stones import ratio_text, stone_of
+
+    assert (stone_of("G3"), stone_of("B0")) == ("F3", "A0")
+    with pytest.raises(ValueError, match="A4 is in row A"):
+        stone_of("A4")
+    inf = float("inf")
+    assert ratio_text(500, 2000) == "0.25" and ratio_text(3000, 1000) == "3.00"
+    assert (ratio_text(inf, inf), ratio_text(1000, inf), ratio_text(inf, 1000)) == \
+        ("neither learned", "learned only from the stone", "learned only from the prior")
+    assert (ratio_text(0, 0), ratio_text(1000, 0)) == ("both 0", "the prior passes at once")
+
+
+def test_bench_stones_chains_real_goals_in_a_cost_maps_work_dir_and_resumes(tmp_path, capsys, monkeypatch):
+    """Real goals, tiny (the cost command test's settings): the stone A0 from the paper prior, then B0 from what
+    that goal stored; the goals from the prior on both join the map's goals.jsonl, the chain stones.jsonl."""
+    import json
+
+    from glocal_app.cli import main
+
+    work, out = tmp_path / "work", tmp_path / "stones.md"
+    flags = ["--targets", "B0", "--profile", "paper", "--seeds", "3", "--step-budget", "16", "--eval-interval", "8",
+             "--eval-episodes", "2", "--envs", "2", "--jobs", "1", "--work-dir", str(work), "--out", str(out)]
+    monkeypatch.setattr("sys.argv", ["glocal-ros", "bench", "stones", *flags])
+    assert main(["bench", "stones", *flags]) == 0
+    assert sorted(json.loads(line)["task"] for line in (work / "goals.jsonl").read_text().splitlines()) == \
+        ["A0", "B0"]
+    (chain,) = [json.loads(line) for line in (work / "stones.jsonl").read_text().splitlines()]
+    assert (chain["task"], chain["stone"], chain["seed"]) == ("B0", "A0", 3)
+    stone_learned = chain["stone_curve"][-1][1] > 1.5
+    assert (chain["curve"] is not None) == stone_learned
+    if stone_learned:
+        assert chain["curve"][0][0] == 0 and chain["curve"][-1][0] <= 16
+    report = out.read_text()
+    assert "Command: `glocal-ros bench stones --targets B0" in report and "| B0 | 3 | " in report
+    capsys.readouterr()
+
+    assert main(["bench", "stones", *flags]) == 0  # everything finished: nothing runs
+    printed = capsys.readouterr().out
+    assert "2 of 2 goals finished before" in printed and "1 chains finished before" in printed
+    with pytest.raises(SystemExit) as exit:
+        main(["bench", "stones", *flags[:-2], "--targets", "A3", "--out", str(out)])
+    assert exit.value.code == 2 and "A3 is in row A" in capsys.readouterr().err
+
+
 @pytest.mark.parametrize("args, message", [
     (["--tasks", "Z9"], "unknown task 'Z9'"),
     (["--tasks", "per-row:9"], "objects per row must lie in 1..7"),

@@ -186,8 +186,12 @@ def object_fingerprint(task: str, objects_dir: Path | None = None) -> str:
 class GoalLog:
     """``goals.jsonl`` of a work directory: one JSON line per finished goal, appended as it finishes."""
 
+    FILE = GOALS_FILE
+    FIELDS = frozenset({"task", "seed", "curve", "key", "object"})  # every line has them
+    WHAT = "a goal of bench cost"
+
     def __init__(self, work_dir: Path):
-        self.path = Path(work_dir) / GOALS_FILE
+        self.path = Path(work_dir) / self.FILE
 
     def records(self) -> list[dict]:
         """Every whole line; a last line without its newline (a kill mid-write) is not one."""
@@ -201,8 +205,8 @@ class GoalLog:
                 record = json.loads(line)
             except json.JSONDecodeError:
                 record = None
-            if not isinstance(record, dict) or not {"task", "seed", "curve", "key", "object"} <= record.keys():
-                raise ValueError(f"{self.path}, line {number}: not a goal of bench cost ({line[:60]!r}): "
+            if not isinstance(record, dict) or not self.FIELDS <= record.keys():
+                raise ValueError(f"{self.path}, line {number}: not {self.WHAT} ({line[:60]!r}): "
                                  "choose another --work-dir")
             records.append(record)
         return records

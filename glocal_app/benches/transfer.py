@@ -167,6 +167,17 @@ def run_goal(recipe: str, prior: str, task: str, seed: int, settings: TransferSe
     Its curve starts with the prior's score at step 0 on the episodes of the goal's own check before its first
     step: with ``settings.stop_at_threshold`` that check itself (the goal runs it), else scored here.
     """
+    (goal,) = run_chain(recipe, prior, [task], seed, settings, prior_store, profile)
+    return goal
+
+
+def run_chain(recipe: str, prior: str, tasks: Sequence[str], seed: int, settings: TransferSettings,
+              prior_store: Path | None = None, profile: str = DEFAULT_PROFILE) -> list[TransferGoal]:
+    """Goals on ``tasks`` in turn, in this process, the first from ``prior`` and each later one from the
+    policy the goal before it stored, as ``run_goal`` runs one; the chain ends early after a goal whose
+    last score is not above B (a policy that did not learn its object leads nowhere). Every goal has the
+    same ``seed``, so a goal on a task sees the episodes of ``run_goal`` on it from any start.
+    """
     from glocal_ros.seeds import derived_seed
     from learner_node.evaluation import evaluate
     from learner_node.policies import PolicyRegistry
@@ -176,25 +187,33 @@ def run_goal(recipe: str, prior: str, task: str, seed: int, settings: TransferSe
     from sim_node.grasp_env import GraspEnv
 
     work = Path(tempfile.mkdtemp(prefix="glocal-bench-transfer-"))
-    envs = BatchedEnvs(lambda i: GraspEnv(task, settings.objects_dir), settings.num_envs, task)
+    envs = BatchedEnvs(lambda i: GraspEnv(tasks[0], settings.objects_dir), settings.num_envs, tasks[0])
+    goals: list[TransferGoal] = []
     try:
         policies = PolicyRegistry(PolicyStore(work / "policies"), prior_stores(prior_store, profile), seed=seed)
-        started = time.perf_counter()
         trainer = Trainer(envs, policies, work / "checkpoints", seed, checkpoint_interval=10**12,
                           profile=learner_profile(profile), fine_tuning=fine_tuning_of(profile, recipe))
-        curve = []
-        if not settings.stop_at_threshold:
-            # The prior as the goal starts it, on the episodes the goal's own step-0 evaluation would score.
-            (start,) = evaluate(envs, trainer.evaluation_policy(prior, [task]), [task], settings.eval_episodes,
-                                seed=derived_seed(seed, EVALUATION_STREAM, 0))
-            curve.append((0, start.successes))
-        trainer.train(TrainSpec(task=task, initial_policy=prior, output_policy="transfer",
-                                step_budget=settings.step_budget, threshold=settings.threshold,
-                                eval_episodes=settings.eval_episodes, eval_interval=settings.eval_interval,
-                                stop_when_learned=settings.stop_at_threshold, seed=seed),
-                      on_evaluation=lambda score, steps: curve.append((steps, score.successes)))
-        return TransferGoal(recipe, task, seed, tuple(curve), settings.eval_episodes, settings.threshold,
-                            time.perf_counter() - started, prior, profile)
+        start_policy = prior
+        for number, task in enumerate(tasks):
+            started = time.perf_counter()
+            curve = []
+            if not settings.stop_at_threshold:
+                # The start as the goal meets it, on the episodes the goal's own step-0 evaluation would score.
+                (start,) = evaluate(envs, trainer.evaluation_policy(start_policy, [task]), [task],
+                                    settings.eval_episodes, seed=derived_seed(seed, EVALUATION_STREAM, 0))
+                curve.append((0, start.successes))
+            output = f"transfer-{number}"
+            trainer.train(TrainSpec(task=task, initial_policy=start_policy, output_policy=output,
+                                    step_budget=settings.step_budget, threshold=settings.threshold,
+                                    eval_episodes=settings.eval_episodes, eval_interval=settings.eval_interval,
+                                    stop_when_learned=settings.stop_at_threshold, seed=seed),
+                          on_evaluation=lambda score, steps: curve.append((steps, score.successes)))
+            goals.append(TransferGoal(recipe, task, seed, tuple(curve), settings.eval_episodes, settings.threshold,
+                                      time.perf_counter() - started, start_policy, profile))
+            if not passes_threshold(curve[-1][1], settings.threshold):
+                break
+            start_policy = output
+        return goals
     finally:
         envs.close()
         shutil.rmtree(work, ignore_errors=True)
