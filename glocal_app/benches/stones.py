@@ -174,7 +174,8 @@ def stones_report(direct: dict[tuple[str, int], TransferGoal], chains: Sequence[
         + (f", objects of `{settings.objects_dir}`" if settings.objects_dir else "")
         + "). From the stone: a goal on the target from the policy that the goal from the prior on the stone "
         "stored, with the seed, and so the evaluation episodes, of the goal from the prior. Ratio: from the "
-        "stone / from the prior; below 1 the stone helped. - : not learned within the cap.",
+        "stone / from the prior; below 1 the stone helped. A stone the prior passes at step 0 is stored "
+        "unchanged, so its chain repeats the goal from the prior. - : not learned within the cap.",
         "",
         "| target | seed | from the prior | stone | the stone from the prior | from the stone | ratio |",
         "| --- | ---: | ---: | --- | ---: | ---: | --- |",
@@ -186,10 +187,15 @@ def stones_report(direct: dict[tuple[str, int], TransferGoal], chains: Sequence[
     for chain in chains:
         from_prior = _steps(direct.get((chain.task, chain.seed)))
         from_stone = _steps(chain.target)
+        if chain.target is None:
+            ratio = "-"
+        elif chain.stone.steps_to_b == 0:  # stored unchanged: the chain's goal repeats the one from the prior
+            ratio = "the stone's policy is the prior"
+        else:
+            ratio = ratio_text(from_stone, from_prior)
         lines.append(f"| {chain.task} | {chain.seed} | {cell(from_prior)} | {chain.stone.task} "
                      f"| {cell(_steps(chain.stone))} | "
-                     + ("stone not learned" if chain.target is None else cell(from_stone))
-                     + f" | {'-' if chain.target is None else ratio_text(from_stone, from_prior)} |")
+                     + ("stone not learned" if chain.target is None else cell(from_stone)) + f" | {ratio} |")
     lines += ["", "Every chain (scores out of "
               f"{settings.eval_episodes}, step:score):", "", "| target | seed | stone's goal | target's goal |",
               "| --- | ---: | --- | --- |"]
