@@ -148,13 +148,14 @@ def cmd_assets_generate(args: argparse.Namespace) -> int:
     from sim_node.scripted_grasp import grasp_trial
 
     shortlist = {} if args.per_column is None else {"per_column": args.per_column}
+    lifting_poses = _lifting_pose_check(args)
     measured = None
     if args.grid == "measured":
         measured = MeasuredGrid(partial(grasp_trial, perturbed_episodes=args.perturbed_episodes), **shortlist)
     elif args.grid == "lifting-poses":
-        measured = MeasuredGrid(_lifting_pose_check(args).trial, letter_by="lifting poses", **shortlist)
+        measured = MeasuredGrid(lifting_poses.trial, letter_by="lifting poses", **shortlist)
     generate_object_set(args.out, seed=args.seed, candidates=args.candidates, workers=args.workers,
-                        progress=_progress, measured=measured, lifting_poses=_lifting_pose_check(args),
+                        progress=_progress, measured=measured, lifting_poses=lifting_poses,
                         config=GeneratorConfig(envelope=args.envelope))
     print(f"wrote {args.out}")
     return cmd_assets_check(args) if args.check_episodes else 0

@@ -14,7 +14,7 @@ from typing import Sequence
 
 import numpy as np
 
-from glocal_ros.spaces import ACTION_DIM, OBSERVATION_LAYOUT
+from glocal_ros.spaces import ACTION_DIM
 from learner_node.evaluation import BatchPolicy
 from learner_node.policy_store import PolicyRecord, PolicyStore, UnknownPolicyError, check_name
 from learner_node.replay_buffer import Experience
@@ -59,19 +59,10 @@ class PolicyRegistry:
 
     def model(self, name: str):
         """The SAC model of a stored policy, loaded again only when its file changed."""
-        self.check_observation_layout(name)
         path = self.model_path(name)
         if self._models.get(name, (None,))[0] != path:
             self._models[name] = (path, self._store_of(name).load(name))
         return self._models[name][1]
-
-    def check_observation_layout(self, name: str) -> None:
-        """``ValueError`` unless ``name`` acts on the observation the sim gives now (``OBSERVATION_LAYOUT``)."""
-        layout = self.record(name).observation_layout
-        if layout != OBSERVATION_LAYOUT:
-            raise ValueError(f"policy {name!r} was trained on observation layout {layout}, and the sim's is "
-                             f"{OBSERVATION_LAYOUT} (glocal_ros/spaces.py): it would act on numbers that mean "
-                             f"something else; train it again from a policy of layout {OBSERVATION_LAYOUT}")
 
     def model_path(self, name: str) -> Path:
         if name == RANDOM_POLICY:

@@ -62,6 +62,14 @@ class PolicyRecord:
     # of layout 1, the only one before the field existed.
     observation_layout: int = OBSERVATION_LAYOUT
 
+    def check_observation_layout(self) -> None:
+        """``ValueError`` unless the policy acts on the observation the sim gives now (``OBSERVATION_LAYOUT``)."""
+        if self.observation_layout != OBSERVATION_LAYOUT:
+            raise ValueError(f"policy {self.name!r} was trained on observation layout {self.observation_layout}, "
+                             f"and the sim's is {OBSERVATION_LAYOUT} (glocal_ros/spaces.py): it would act on "
+                             f"numbers that mean something else; train it again from a policy of layout "
+                             f"{OBSERVATION_LAYOUT}")
+
 
 def check_name(name: str) -> str:
     if not _NAME.match(name):
@@ -98,8 +106,11 @@ class PolicyStore:
         return self.root / name / self.record(name).model_file
 
     def load(self, name: str, **kwargs):
-        """The SAC model of ``name``, in a process that computes as the learner's (``sac_settings.load_model``)."""
-        return load_model(self.model_path(name), **kwargs)
+        """The SAC model of ``name``, in a process that computes as the learner's (``sac_settings.load_model``);
+        ``ValueError`` when it acts on another observation layout than the sim's."""
+        record = self.record(name)
+        record.check_observation_layout()
+        return load_model(self.root / name / record.model_file, **kwargs)
 
     def experience(self, name: str) -> Experience | None:
         """The transitions ``name`` keeps; None when it keeps none."""

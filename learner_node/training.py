@@ -216,8 +216,8 @@ class Trainer:
     def check_initial_policy(self, name: str) -> None:
         """``ValueError`` unless a goal of this trainer may start from ``name``: a policy of its profile
         that acts on the sim's observation layout."""
-        self.policies.check_observation_layout(name)
         record = self.policies.record(name)
+        record.check_observation_layout()
         if record.profile != self.profile.name:
             raise ValueError(f"policy {name!r} was trained under learner profile {record.profile!r}, and this "
                              f"learner runs profile {self.profile.name!r}: start from a policy of "

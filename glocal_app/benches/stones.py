@@ -96,13 +96,19 @@ def finished_chains(work_dir: Path, settings: TransferSettings, profile: str = D
     log = StoneLog(work_dir)
     key = run_key(settings, profile, prior_store)
     chains: dict[tuple[str, int], StoneChain] = {}
+    fingerprints: dict[str, str] = {}
+
+    def fingerprint(task: str) -> str:
+        if task not in fingerprints:
+            fingerprints[task] = object_fingerprint(task, settings.objects_dir)
+        return fingerprints[task]
+
     for number, record in enumerate(log.records(), 1):
         if record["key"] != key:
             raise ValueError(f"{log.path}, line {number}: a chain of other settings than the map's: choose "
                              "another --work-dir")
         task, stone, seed = record["task"], record["stone"], int(record["seed"])
-        if (record["object"], record["stone_object"]) != (object_fingerprint(task, settings.objects_dir),
-                                                           object_fingerprint(stone, settings.objects_dir)):
+        if (record["object"], record["stone_object"]) != (fingerprint(task), fingerprint(stone)):
             raise ValueError(f"the objects of {stone} or {task} have changed since their chain in {log.path} "
                              "ran: choose another --work-dir")
 

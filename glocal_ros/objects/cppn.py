@@ -82,8 +82,7 @@ def _listify(value: Any) -> Any:
 def sample_cppn(rng: np.random.Generator, complexity_knob: float, envelope: str = "blob") -> CPPNParams:
     """Draw a random field whose structural richness grows with ``complexity_knob``, its base solid's
     proportions from ``envelope`` (see the module's docstring)."""
-    if envelope not in ENVELOPES:
-        raise ValueError(f"unknown envelope {envelope!r}: choose one of {', '.join(ENVELOPES)}")
+    check_envelope(envelope)
     k = float(np.clip(complexity_knob, 0.0, 1.0))
     semi_axes, taper = _base_proportions(rng, envelope)
     # p = 2 is an ellipsoid; larger p tends to a box, so simple shapes cover both.
@@ -126,6 +125,12 @@ def sample_cppn(rng: np.random.Generator, complexity_knob: float, envelope: str 
         output_bias=round(float(-net.mean() * gain / std + rng.normal(0.0, 0.3)), 6),
         taper=taper,
     )
+
+
+def check_envelope(envelope: str) -> None:
+    """``ValueError`` naming the envelopes, unless ``envelope`` is one."""
+    if envelope not in ENVELOPES:
+        raise ValueError(f"unknown envelope {envelope!r}: choose one of {', '.join(ENVELOPES)}")
 
 
 def _base_proportions(rng: np.random.Generator, envelope: str) -> tuple[tuple[float, float, float], float]:

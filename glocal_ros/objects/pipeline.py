@@ -31,7 +31,7 @@ from typing import Callable, Iterator, Optional, Sequence
 import numpy as np
 import trimesh
 
-from glocal_ros.objects.cppn import ENVELOPES, CPPNParams, evaluate_field, sample_cppn, solid_bounds
+from glocal_ros.objects.cppn import CPPNParams, check_envelope, evaluate_field, sample_cppn, solid_bounds
 from glocal_ros.objects.grid import (
     BINNING_METHOD,
     LETTER_MEASURES,
@@ -152,8 +152,7 @@ class GeneratorConfig:
     """The base solids' proportions (``glocal_ros.objects.cppn.ENVELOPES``)."""
 
     def __post_init__(self) -> None:
-        if self.envelope not in ENVELOPES:
-            raise ValueError(f"unknown envelope {self.envelope!r}: choose one of {', '.join(ENVELOPES)}")
+        check_envelope(self.envelope)
 
     def to_dict(self) -> dict:
         out = asdict(self)
