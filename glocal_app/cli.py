@@ -347,7 +347,7 @@ def cmd_bench_transfer(args: argparse.Namespace) -> int:
                                              transfer_bench_report)
 
     settings = TransferSettings(step_budget=args.budget, eval_interval=args.eval_interval,
-                                eval_episodes=args.eval_episodes, num_envs=args.envs)
+                                eval_episodes=args.eval_episodes, num_envs=args.envs, objects_dir=args.objects_dir)
     command = "glocal-ros " + " ".join(sys.argv[1:])
     if args.tabulate:
         try:
@@ -650,6 +650,9 @@ def build_parser() -> argparse.ArgumentParser:
                                 help="a policy store searched for the priors before the profile's shipped one "
                                      "(train-prior --out)")
     bench_transfer.add_argument("--tasks", default=",".join(TRANSFER_TASKS), help="comma-separated tasks")
+    bench_transfer.add_argument("--objects-dir", type=Path, default=None, metavar="DIR",
+                                help="the object set the goals grasp, in the layout `assets generate` writes "
+                                     "(default: the shipped one)")
     bench_transfer.add_argument("--seeds", default="0,1,2", help="comma-separated goal seeds")
     bench_transfer.add_argument("--budget", type=int, default=transfer_defaults.step_budget,
                                 help="training steps of every goal")

@@ -84,7 +84,7 @@ def test_recorder_warns_about_a_gap_as_it_arrives(start_node, ros_node, tmp_path
     wait_until(lambda: publisher.get_subscription_count(), 60, "the recorder's subscription", processes=[recorder])
     for seq in (0, 1, 2, 5, 6, 6):
         publisher.publish(episode(seq))
-    assert publisher.wait_for_all_acked(Duration(seconds=10))
+    assert publisher.wait_for_all_acked(Duration(seconds=60))
     wait_until(lambda: "episode seq gap: 3..4 missing" in recorder.log(), 60, "the gap warning",
                processes=[recorder])
     assert recorder.stop(signal.SIGINT) == 0, recorder.log()
@@ -115,7 +115,7 @@ def test_a_killed_recorder_loses_nothing_before_its_last_flush(start_node, ros_n
     wait_until(lambda: mcap.is_file() and mcap.stat().st_size > 0, 60, "the schemas on disk", processes=[recorder])
     for seq in range(5):
         publisher.publish(episode(seq))
-    assert publisher.wait_for_all_acked(Duration(seconds=10))
+    assert publisher.wait_for_all_acked(Duration(seconds=60))
     wait_until(lambda: messages_on_disk(mcap) == 5, 60, "the 5 episodes flushed", processes=[recorder])
     recorder.process.kill()
     recorder.process.wait(10)
@@ -151,7 +151,7 @@ def test_repair_recovers_what_a_killed_recorder_wrote(start_node, ros_node, tmp_
     published = [episode(seq, values=50_000) for seq in range(13)]
     for record in published:
         publisher.publish(record)
-    assert publisher.wait_for_all_acked(Duration(seconds=10))
+    assert publisher.wait_for_all_acked(Duration(seconds=60))
     mcap = bag / "bag.mcap"
     sizes = []
 

@@ -191,6 +191,7 @@ def test_a_transfer_curve_gives_steps_to_b_and_collapse():
     (dict(tasks=["Z9"]), "Z9"),
     (dict(settings=TransferSettings(step_budget=1000, eval_interval=300)), "multiple of the envs"),
     (dict(settings=TransferSettings(eval_episodes=0)), "at least 1"),
+    (dict(settings=TransferSettings(objects_dir=Path("/no/such/objects"))), "holds no model.urdf for A0"),
     (dict(seeds=[]), "a seed"),
     (dict(seeds=[1, 1]), "must not repeat"),
     (dict(seeds=[-1]), "seeds must lie in"),
@@ -213,7 +214,8 @@ def test_bench_transfer_command_line():
     assert (args.priors, args.prior_store, args.profiles) == ("prior", None, "glocal_ros")
     assert build_parser().parse_args(["bench", "transfer"]).recipes == "default"
     args = build_parser().parse_args(["bench", "transfer", "--priors", "prior,prior-64x64", "--prior-store", "p"])
-    assert (args.priors, args.prior_store) == ("prior,prior-64x64", Path("p"))
+    assert (args.priors, args.prior_store, args.objects_dir) == ("prior,prior-64x64", Path("p"), None)
+    assert build_parser().parse_args(["bench", "transfer", "--objects-dir", "o"]).objects_dir == Path("o")
 
 
 # ---- bench cost ----------------------------------------------------------------------------------------------
@@ -473,6 +475,7 @@ def test_bench_stones_chains_real_goals_in_a_cost_maps_work_dir_and_resumes(tmp_
     (["--jobs", "0"], "at least one job"),
     (["--tabulate", "--step-budget", "1500"], "divide the budget"),
     (["--prior-store", "/no/such/store"], "is not a directory"),
+    (["--objects-dir", "/no/such/objects"], "holds no model.urdf"),
 ])
 def test_bench_cost_refuses_bad_input_before_anything_runs(tmp_path, capsys, args, message):
     from glocal_app.cli import main

@@ -296,20 +296,19 @@ def test_a_goal_whose_sim_dies_is_aborted_with_the_steps_it_trained(graph, ros_n
     assert "prior" in stored_policies(ros_node) and learner.running, "the learner stopped serving"
 
 
-@pytest.mark.parametrize("graph", [dict(learner=dict(checkpoint_interval=10**6))], indirect=True,
-                         ids=["no_periodic_checkpoint"])
+@pytest.mark.parametrize("graph", [dict(learner=dict(checkpoint_interval=10**6, sim_timeout_sec=600.0))],
+                         indirect=True, ids=["no_periodic_checkpoint"])
 def test_ctrl_c_mid_goal_checkpoints_the_last_step_at_once(graph):
     """Ctrl-C reaches sim and learner together: the step that is out (nearly always, as updates overlap
-    it) is never answered, and the learner checkpoints its last whole step instead of waiting for it."""
+    it) is never answered, and the learner checkpoints its last whole step instead of waiting for it.
+    A learner that waited would wait sim_timeout_sec (600 s) and be killed by ``stop`` long before."""
     learner = graph["learner"]  # checkpoint_interval 10**6: no periodic checkpoint
     goal = Goal(graph["train"], train_goal(step_budget=5_000))
     wait_until(lambda: goal.feedback and goal.feedback[-1].steps >= 320, 120, "updates under way",
                processes=[learner])
     steps_seen = goal.feedback[-1].steps
-    started = time.monotonic()
     graph["sim"].process.send_signal(signal.SIGINT)
-    assert learner.stop(signal.SIGINT) == 0, learner.log()
-    assert time.monotonic() - started < 8
+    assert learner.stop(signal.SIGINT, timeout=120) == 0, learner.log()
     checkpoint = json.loads((graph["policy_dir"] / ".checkpoints" / "trained" / "checkpoint.json").read_text())
     assert checkpoint["state"]["steps_used"] >= steps_seen
     assert "Traceback" not in learner.log()

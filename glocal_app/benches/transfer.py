@@ -263,6 +263,11 @@ def check_goals(recipes: Sequence[str], priors: Sequence[str], prior_store: Path
                                  f"{store.record(prior).profile!r}, not {profile!r}")
     validate_tasks(list(tasks))
     settings.check()
+    if settings.objects_dir is not None:
+        missing = [task for task in tasks if not (settings.objects_dir / task / "model.urdf").is_file()]
+        if missing:
+            raise ValueError(f"{settings.objects_dir} holds no model.urdf for {', '.join(missing)} (the layout "
+                             "`assets generate` writes: <TASK>/model.urdf)")
     if not recipes or not priors or not tasks or not seeds or not profiles or jobs < 1:
         raise ValueError("the goals need a profile, a recipe, a prior, a task, a seed and at least one job")
     if any(len(set(values)) != len(values) for values in (recipes, priors, tasks, seeds, profiles)):
@@ -313,8 +318,9 @@ def run_transfer_graph(recipes: Sequence[str], tasks: Sequence[str], seeds: Sequ
         policy_dir = work / f"policies{index}"
         source = next(store for store in prior_stores(prior_store, profile) if prior in store)
         PolicyStore(policy_dir).add_copy(source, prior, prior)
-        processes = [NodeProcess("sim_node", work / "logs", {"num_envs": settings.num_envs, "initial_task": tasks[0]},
-                                 env=env, extra_args=remap),
+        sim_parameters = {"num_envs": settings.num_envs, "initial_task": tasks[0],
+                          **({"objects_dir": str(settings.objects_dir)} if settings.objects_dir else {})}
+        processes = [NodeProcess("sim_node", work / "logs", sim_parameters, env=env, extra_args=remap),
                      NodeProcess("learner_node", work / "logs",
                                  {"policy_dir": str(policy_dir), "learner_profile": profile,
                                   "fine_tuning": "" if recipe == PROFILE_RECIPE else recipe, "seed": 0,
@@ -436,7 +442,9 @@ def transfer_bench_report(goals: Sequence[TransferGoal], command: str, settings:
         f"{settings.step_budget} training steps on "
         f"{settings.num_envs} envs, scored every "
         f"{settings.eval_interval} steps over {settings.eval_episodes} deterministic episodes, not stopped when "
-        f"learned; B = {settings.threshold:g}. Tasks {', '.join(tasks)}; seeds {', '.join(map(str, seeds))}. "
+        f"learned; B = {settings.threshold:g}. Tasks {', '.join(tasks)}"
+        + (f" of `{settings.objects_dir}`" if settings.objects_dir else "")
+        + f"; seeds {', '.join(map(str, seeds))}. "
         f"Steps to B: the first evaluation above B (a prior already above it: 0); the median counts a goal "
         f"that never passed as slower than all. A curriculum trains only tasks below B, so the columns of the "
         f"goals that started below B are the speed that matters. Collapse: a score {COLLAPSE_POINTS:g} or more "
