@@ -241,18 +241,25 @@ def cmd_assets_show(args: argparse.Namespace) -> int:
 def cmd_assets_validate(args: argparse.Namespace) -> int:
     """The letter against perturbed and scripted grasp success, the prior's score and steps to B."""
     from glocal_app.benches.assets import prior_scores, steps_to_b, validation_figure, validation_report
+    from glocal_app.benches.cost import held_cost_map
     from glocal_app.benches.transfer import read_transfer_goals
     from glocal_ros.objects import ObjectSetMetadata
 
     metadata = ObjectSetMetadata.load(args.out)
-    transfer = []
-    if args.transfer:
-        try:
-            transfer = [goal for path in args.transfer for goal in read_transfer_goals(path, TransferSettings())
-                        if goal.recipe == args.recipe and goal.prior == INITIAL_POLICY]
-        except (OSError, ValueError) as error:
-            print(f"assets validate: {error}", file=sys.stderr)
-            return 1
+    goals, cost = [], ""
+    try:
+        if args.cost:
+            settings, goals = held_cost_map(args.cost, args.out, args.prior_store)
+            cost = (f"the cost map in `{args.cost}` ({len(goals)} goals from the prior, stopped at B, capped at "
+                    f"{settings.step_budget} steps, scored every {settings.eval_interval} over "
+                    f"{settings.eval_episodes} episodes)")
+        elif args.transfer:
+            goals = [goal for path in args.transfer for goal in read_transfer_goals(path, TransferSettings())
+                     if goal.recipe == args.recipe and goal.prior == INITIAL_POLICY]
+            cost = f"goals of {', '.join(map(str, args.transfer))} ({args.recipe})"
+    except (OSError, ValueError) as error:
+        print(f"assets validate: {error}", file=sys.stderr)
+        return 1
     tasks = sorted_tasks(metadata.objects)
     measures = {
         "perturbed": {t: o.perturbed_grasp_success for t, o in metadata.objects.items()
@@ -263,17 +270,18 @@ def cmd_assets_validate(args: argparse.Namespace) -> int:
                           if o.lifting_pose_share is not None},
         "best_pose": {t: o.best_pose_success for t, o in metadata.objects.items()
                       if o.best_pose_success is not None},
-        "prior": prior_scores(args.out, tasks, args.episodes, seed=args.seed) if args.episodes else {},
-        "steps_to_b": steps_to_b(transfer),
+        "prior": (prior_scores(args.out, tasks, args.episodes, seed=args.seed, prior_store=args.prior_store)
+                  if args.episodes else {}),
+        "steps_to_b": steps_to_b(goals),
     }
     figure = validation_figure(measures, args.report.with_suffix(".png"))
     command = "glocal-ros " + " ".join(sys.argv[1:])
     preamble = (f"Objects: `{args.out}` (generator {metadata.generator_version}, {metadata.source}). (a) and (b) "
                 f"from its `objects.json` (`glocal-ros assets check`), as are lifting poses and the best pose "
                 f"(`glocal-ros assets lifting-poses`); (c) {args.episodes} deterministic "
-                f"episodes of the shipped prior per object (seed {args.seed}), task bits it never trained on "
-                f"as the mean of the trained one; (d) goals of {', '.join(map(str, args.transfer or [])) or 'no'}"
-                f" transfer report ({args.recipe}). Figure: `{figure.name}`.")
+                f"episodes of the prior ({args.prior_store or 'shipped'}) per object (seed {args.seed}), task "
+                f"bits it never trained on as the mean of the trained one; (d) steps to B from "
+                f"{cost or 'no goals'}. Figure: `{figure.name}`.")
     return write_bench_report(validation_report(measures, command, preamble), args.report)
 
 
@@ -506,6 +514,12 @@ def _add_rate_arguments(parser: argparse.ArgumentParser, envs: str, steps: int) 
     parser.add_argument("--rounds", type=int, default=3, help="alternating rounds; the median is reported")
 
 
+def _add_prior_store_argument(command: argparse.ArgumentParser) -> None:
+    command.add_argument("--prior-store", type=Path, default=None, metavar="DIR",
+                         help="a policy store searched for the prior before the profile's shipped one "
+                              "(train-prior --out; for a set of another A0)")
+
+
 def _add_cost_goal_arguments(command: argparse.ArgumentParser, default_envs: int) -> None:
     """What decides a cost map's goals, and where they are kept: ``bench cost``'s and ``bench stones``'."""
     command.add_argument("--seeds", type=_seed_list, default=list(cost_bench.DEFAULT_SEEDS),
@@ -524,9 +538,7 @@ def _add_cost_goal_arguments(command: argparse.ArgumentParser, default_envs: int
     add_profile_argument(command)
     command.add_argument("--objects-dir", type=Path, default=None, metavar="DIR",
                          help="the object set to map, in the layout `assets generate` writes (default: the shipped one)")
-    command.add_argument("--prior-store", type=Path, default=None, metavar="DIR",
-                         help="a policy store searched for the prior before the profile's shipped one "
-                              "(train-prior --out; for a set of another A0)")
+    _add_prior_store_argument(command)
     command.add_argument("--work-dir", type=Path, default=cost_bench.DEFAULT_WORK_DIR,
                          help="where each goal is kept as it finishes (goals.jsonl), for the same command to "
                               f"skip (default: {cost_bench.DEFAULT_WORK_DIR})")
@@ -593,9 +605,13 @@ def build_parser() -> argparse.ArgumentParser:
     validate.add_argument("--episodes", type=_count(0), default=100,
                           help="episodes of the prior per object (0: none)")
     validate.add_argument("--seed", type=int, default=0)
-    validate.add_argument("--transfer", type=Path, nargs="*", help="bench transfer reports (default budget) "
-                          "whose goals give steps to B")
+    steps_source = validate.add_mutually_exclusive_group()
+    steps_source.add_argument("--cost", type=Path, default=None, metavar="WORK_DIR",
+                              help="a bench cost work directory (of this set) whose goals give steps to B")
+    steps_source.add_argument("--transfer", type=Path, nargs="*", help="bench transfer reports (default budget) "
+                              "whose goals give steps to B")
     validate.add_argument("--recipe", default=DEFAULT_RECIPE, help="the transfer reports' recipe to use")
+    _add_prior_store_argument(validate)
     validate.add_argument("--report", type=Path, default=Path("bench/results/assets-validate.md"),
                           help="the report; the figure is written beside it as .png")
     validate.set_defaults(func=cmd_assets_validate)
@@ -646,9 +662,7 @@ def build_parser() -> argparse.ArgumentParser:
                                      f"or where the profile allows one, {', '.join(FINE_TUNING_RECIPES)}")
     bench_transfer.add_argument("--priors", default=INITIAL_POLICY,
                                 help="comma-separated stored policies the goals start from (each recipe from each)")
-    bench_transfer.add_argument("--prior-store", type=Path, default=None,
-                                help="a policy store searched for the priors before the profile's shipped one "
-                                     "(train-prior --out)")
+    _add_prior_store_argument(bench_transfer)
     bench_transfer.add_argument("--tasks", default=",".join(TRANSFER_TASKS), help="comma-separated tasks")
     bench_transfer.add_argument("--objects-dir", type=Path, default=None, metavar="DIR",
                                 help="the object set the goals grasp, in the layout `assets generate` writes "

@@ -81,6 +81,44 @@ def test_validate_reports_the_lifting_poses_objects_json_holds(tmp_path) -> None
     assert "fail: G0 (70%)." in text and g0.endswith("| 17% | 70% (fails) |")
 
 
+def write_cost_map(work_dir, steps_to_b: dict) -> None:
+    """A bench cost work directory as the bench writes it, of hand-made curves: task -> steps to B (None: not
+    learned within a cap of 3,000), seed 0, keyed on the shipped prior and the committed objects."""
+    from glocal_app.benches.cost import GoalLog, cost_settings, goal_record, object_fingerprint, run_key
+    from glocal_app.benches.transfer import TransferGoal
+
+    settings = cost_settings(step_budget=3_000)
+    work_dir.mkdir()
+    log = GoalLog(work_dir)
+    for task, steps in steps_to_b.items():
+        last = settings.step_budget if steps is None else steps
+        curve = tuple((step, 80 if step == steps else 10) for step in range(0, last + 1, settings.eval_interval))
+        goal = TransferGoal("default", task, 0, curve, 100, 75.0, 1.0)
+        log.append(goal_record(goal, run_key(settings), object_fingerprint(task)))
+
+
+def test_validate_takes_steps_to_b_from_a_cost_map(tmp_path) -> None:
+    write_cost_map(tmp_path / "cost", {"A1": 0, "C2": 1_000, "E4": 2_000, "G5": None})
+    report = tmp_path / "validate.md"
+    result = run_validate("--episodes", "0", "--cost", str(tmp_path / "cost"), "--report", str(report))
+    assert result.returncode == 0, result.stderr
+    text = report.read_text()
+    assert "| steps to B | 4 | 1.00 | harder |" in text, text
+    assert "the cost map in" in text and "capped at 3000 steps" in text
+    g5 = next(line for line in text.splitlines() if line.startswith("| G5 |"))
+    assert "never" in g5, g5
+
+
+def test_validate_refuses_an_empty_cost_map_and_two_sources_of_steps_to_b(tmp_path) -> None:
+    (tmp_path / "empty").mkdir()
+    result = run_validate("--episodes", "0", "--cost", str(tmp_path / "empty"), "--report",
+                          str(tmp_path / "validate.md"))
+    assert result.returncode == 1 and "holds no goal of bench cost" in result.stderr, result.stderr
+    both = run_validate("--episodes", "0", "--cost", str(tmp_path / "empty"), "--transfer", str(TRANSFER_REPORT))
+    assert both.returncode == 2 and "not allowed with argument" in both.stderr
+    assert not (tmp_path / "validate.md").exists()
+
+
 def test_validate_refuses_a_file_that_is_no_transfer_report(tmp_path) -> None:
     result = run_validate("--episodes", "0", "--transfer", str(REPO / "README.md"), "--report",
                           str(tmp_path / "validate.md"))

@@ -15,8 +15,10 @@ each measure, over the objects that have it:
     as the mean of the trained one (``learner_node.fine_tuning``). Without
     that, its score on an object is mostly the effect of a random input
     weight, not of the object;
-(d) median steps to B per task of the goals of a ``glocal-ros bench transfer``
-    report (optional; a goal that never passed counts as slower than any).
+(d) median steps to B per task, the learning cost, of the goals of a
+    ``glocal-ros bench cost`` work directory or of ``glocal-ros bench
+    transfer`` reports (optional; a goal that never passed counts as slower
+    than any).
 
 The easy rows should be the easy objects: (a), (a'), (b) and (c) fall with
 the letter (negative), (d) rises with it. Rows are summarised by the mean of
@@ -49,11 +51,14 @@ _ROW_MEDIANS = ("lifting_poses", "steps_to_b")
 
 
 def prior_scores(objects_dir: Path, tasks: Sequence[str], episodes: int, seed: int = 0,
-                 num_envs: int = 2, profile: str = DEFAULT_PROFILE) -> dict[str, float]:
-    """Share of ``episodes`` seeded deterministic episodes in which ``profile``'s shipped prior lifts each
-    object, scored as ``learner/evaluate`` scores it (a goal's check before its first step)."""
+                 num_envs: int = 2, profile: str = DEFAULT_PROFILE,
+                 prior_store: Path | None = None) -> dict[str, float]:
+    """Share of ``episodes`` seeded deterministic episodes in which ``profile``'s prior lifts each object,
+    scored as ``learner/evaluate`` scores it (a goal's check before its first step). The prior is the one of
+    ``prior_store`` where it holds one (a set of another A0), else the profile's shipped one."""
     import tempfile
 
+    from glocal_app.benches.transfer import prior_stores
     from learner_node.evaluation import evaluate
     from learner_node.policies import PolicyRegistry
     from learner_node.policy_store import PolicyStore
@@ -61,12 +66,11 @@ def prior_scores(objects_dir: Path, tasks: Sequence[str], episodes: int, seed: i
     from sim_node.batch import BatchedEnvs
     from sim_node.grasp_env import GraspEnv
 
-    shipped = learner_profile(profile)
     envs = BatchedEnvs(lambda i: GraspEnv(tasks[0], objects_dir=objects_dir), num_envs, tasks[0])
     try:
         with tempfile.TemporaryDirectory(prefix="glocal-validate-") as work:
-            policies = PolicyRegistry(PolicyStore(Path(work) / "policies"), [PolicyStore(shipped.shipped_priors())])
-            trainer = Trainer(envs, policies, Path(work) / "checkpoints", profile=shipped)
+            policies = PolicyRegistry(PolicyStore(Path(work) / "policies"), prior_stores(prior_store, profile))
+            trainer = Trainer(envs, policies, Path(work) / "checkpoints", profile=learner_profile(profile))
             scores = evaluate(envs, trainer.evaluation_policy("prior", tasks), tasks, episodes,
                               policy_name="prior", seed=seed)
     finally:

@@ -257,6 +257,26 @@ def finished_goals(work_dir: Path, settings: TransferSettings, profile: str = DE
     return goals
 
 
+def held_cost_map(work_dir: Path, objects_dir: Path | None = None,
+                  prior_store: Path | None = None) -> tuple[TransferSettings, list[TransferGoal]]:
+    """Every goal a cost map's ``work_dir`` holds, with the settings they ran with (read off their key), for
+    a reader that did not run them (``assets validate``); ``ValueError`` when it holds none, or goals of
+    another prior or of objects that have changed since (``finished_goals``)."""
+    records = GoalLog(work_dir).records()
+    if not records:
+        raise ValueError(f"{Path(work_dir) / GOALS_FILE} holds no goal of bench cost")
+    key = records[0]["key"]
+    try:
+        settings = cost_settings(key["step_budget"], key["eval_interval"], key["eval_episodes"], key["num_envs"],
+                                 objects_dir)
+        profile = key["profile"]
+    except (KeyError, TypeError):
+        raise ValueError(f"{Path(work_dir) / GOALS_FILE}, line 1: not a goal of bench cost (its key lacks "
+                         "the settings)") from None
+    goals = finished_goals(work_dir, settings, profile, prior_store)
+    return settings, [goals[goal] for goal in sorted(goals, key=lambda goal: (grid_coordinates(goal[0]), goal[1]))]
+
+
 @contextmanager
 def work_lock(work_dir: Path) -> Iterator[None]:
     """Hold ``work_dir`` for this process; ``ValueError`` when another bench holds it."""
