@@ -175,22 +175,31 @@ def cmd_assets_import_egad(args: argparse.Namespace) -> int:
 
 
 def cmd_assets_check(args: argparse.Namespace) -> int:
-    """The scripted grasp and the perturbed grasp on every object; rates stored in objects.json."""
-    from glocal_ros.objects import ObjectSetMetadata, record_grasp_success
+    """The scripted grasp and the perturbed grasp on every object; rates stored in objects.json. Exit 1 when an
+    object is never grasped by the scripted grasp and no best pose of at least ``MIN_BEST_POSE_SUCCESS`` is on
+    record for it: a slab the centred descent never lifts is learnable when another top-down pose lifts it."""
+    from glocal_ros.objects import MIN_BEST_POSE_SUCCESS, ObjectSetMetadata, never_grasped, record_grasp_success
     from sim_node.scripted_grasp import GraspErrors, graspability
 
-    tasks = sorted_tasks(ObjectSetMetadata.load(args.out).objects)
+    objects = ObjectSetMetadata.load(args.out).objects
+    tasks = sorted_tasks(objects)
     scripted = graspability(args.out, tasks, args.check_episodes, seed=args.seed,
                             progress=lambda task, rate: print(f"{task}: scripted grasp {rate:.0%}", flush=True))
     perturbed = graspability(args.out, tasks, args.perturbed_episodes, seed=args.seed, errors=GraspErrors(),
                              progress=lambda task, rate: print(f"{task}: perturbed grasp {rate:.0%}", flush=True))
     record_grasp_success(args.out, scripted, perturbed)
-    never = [task for task, rate in scripted.items() if rate == 0]
+    best_poses = {task: objects[task].best_pose_success for task in tasks}
+    never, unlearnable = never_grasped(scripted, best_poses)
+    never_text = ", ".join(f"{task} (best pose: " + ("not measured" if best_poses[task] is None
+                                                     else f"{best_poses[task]:.0%}") + ")" for task in never)
     print(f"scripted grasp: mean {sum(scripted.values()) / len(scripted):.0%}, lowest "
-          f"{min(scripted.values()):.0%}; never grasped: {', '.join(never) or 'none'}")
+          f"{min(scripted.values()):.0%}; never grasped: {never_text or 'none'}")
     print(f"perturbed grasp: mean {sum(perturbed.values()) / len(perturbed):.0%}, lowest "
           f"{min(perturbed.values()):.0%}, highest {max(perturbed.values()):.0%}")
-    return 1 if never else 0
+    if unlearnable:
+        print(f"not learnable: {', '.join(unlearnable)} (never grasped, and no best pose of at least "
+              f"{MIN_BEST_POSE_SUCCESS:.0%} on record: glocal-ros assets lifting-poses)", file=sys.stderr)
+    return 1 if unlearnable else 0
 
 
 def _lifting_pose_check(args: argparse.Namespace):
@@ -537,7 +546,8 @@ def _add_cost_goal_arguments(command: argparse.ArgumentParser, default_envs: int
                          help="goals run at a time (default: one per core)")
     add_profile_argument(command)
     command.add_argument("--objects-dir", type=Path, default=None, metavar="DIR",
-                         help="the object set to map, in the layout `assets generate` writes (default: the shipped one)")
+                         help="the object set to map, in the layout `assets generate` writes (default: the "
+                              "shipped one)")
     _add_prior_store_argument(command)
     command.add_argument("--work-dir", type=Path, default=cost_bench.DEFAULT_WORK_DIR,
                          help="where each goal is kept as it finishes (goals.jsonl), for the same command to "

@@ -21,6 +21,7 @@ from glocal_ros.objects import (
     ObjectSetMetadata,
     UnliftableObjectError,
     import_egad,
+    never_grasped,
     record_lifting_poses,
 )
 from glocal_ros.objects.meshing import write_obj
@@ -199,3 +200,11 @@ def test_the_import_command_refuses_an_unliftable_mesh_and_writes_nothing(meshes
     assert result.returncode == 1 and "Traceback" not in result.stderr
     assert "G1 (best pose lifts it 0% of the time)" in result.stderr and "is unchanged" in result.stderr
     assert sorted(entry.name for entry in tmp_path.iterdir()) == ["egad"]
+
+
+def test_an_object_the_centred_grasp_never_lifts_is_learnable_by_its_best_pose() -> None:
+    """`assets check` fails a set only for an object that no top-down pose on record lifts 80% of the time."""
+    scripted = {"A0": 1.0, "G4": 0.0, "G5": 0.0, "G6": 0.0}
+    never, unlearnable = never_grasped(scripted, {"A0": 1.0, "G4": 1.0, "G5": 0.7, "G6": None})
+    assert never == ["G4", "G5", "G6"] and unlearnable == ["G5", "G6"]
+    assert never_grasped({"A0": 0.95}, {}) == ([], [])

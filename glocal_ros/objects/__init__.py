@@ -42,6 +42,7 @@ from glocal_ros.objects.pipeline import (
     generate_object_set,
     import_egad,
     measure_lifting_poses,
+    never_grasped,
     sample_candidates,
     unliftable,
 )
@@ -77,6 +78,7 @@ __all__ = [
     "import_egad",
     "measure_lifting_poses",
     "morphological_complexity",
+    "never_grasped",
     "record_grasp_success",
     "record_lifting_poses",
     "render_contact_sheet",

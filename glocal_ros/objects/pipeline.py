@@ -26,7 +26,7 @@ import shutil
 import tempfile
 from dataclasses import asdict, dataclass, field
 from pathlib import Path
-from typing import Callable, Iterator, Optional, Sequence
+from typing import Callable, Iterator, Mapping, Optional, Sequence
 
 import numpy as np
 import trimesh
@@ -375,6 +375,15 @@ def unliftable(results: dict[str, tuple[float, float]], minimum: float = MIN_BES
     ``minimum``, in the order given."""
     return [f"{task} (best pose lifts it {best:.0%} of the time)" for task, (_, best) in results.items()
             if best < minimum]
+
+
+def never_grasped(scripted: Mapping[str, float], best_poses: Mapping[str, Optional[float]],
+                  minimum: float = MIN_BEST_POSE_SUCCESS) -> tuple[list[str], list[str]]:
+    """The tasks the scripted (centred) grasp never lifts, and those of them that are not learnable: no best
+    pose lifting them at least ``minimum`` of the time is on record (None: not measured). A slab that the
+    centred descent never lifts is learnable where another top-down pose lifts it."""
+    never = [task for task, rate in scripted.items() if rate == 0]
+    return never, [task for task in never if (best_poses.get(task) or 0.0) < minimum]
 
 
 def _check_lifting_poses(staging: Path, metadata: ObjectSetMetadata, check: LiftingPoseCheck,
