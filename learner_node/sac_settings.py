@@ -294,6 +294,13 @@ FINE_TUNING_RECIPES: dict[str, FineTuning] = {
                                                    optimizers="unseen-as-bias"),
     "parent-experience-task-inputs": FineTuning(first_actions="policy", experience=EXPERIENCE_TRANSITIONS,
                                                 new_task_inputs="trained-mean"),
+    # The default, slowed where it dips on objects the prior fails (bench/results/transfer-wide-dip.md):
+    "parent-experience-task-inputs-critic-warmup-2000": FineTuning(
+        first_actions="policy", experience=EXPERIENCE_TRANSITIONS, new_task_inputs="trained-mean",
+        critic_warmup=2000),
+    "parent-experience-task-inputs-lr1e-4": FineTuning(
+        first_actions="policy", experience=EXPERIENCE_TRANSITIONS, new_task_inputs="trained-mean",
+        learning_rate=1e-4),
 }
 DEFAULT_RECIPE = "parent-experience-task-inputs"
 DEFAULT_FINE_TUNING = FINE_TUNING_RECIPES[DEFAULT_RECIPE]
