@@ -56,7 +56,7 @@ from rosbags.highlevel import AnyReader
 from rosbags.typesys import Stores, get_typestore
 
 from glocal_ros import topics
-from glocal_ros.paths import objects_dir
+from glocal_ros.paths import object_urdf, objects_dir
 from glocal_ros.recording import open_bag, topic_namespace
 from glocal_ros.transforms import IDENTITY, FrameLookupError, Transform, resolve_frames
 from glocal_ros.urdf import RobotModel, parse_urdf
@@ -469,7 +469,7 @@ def render_sim(state: SimState, camera: Camera = DEFAULT_CAMERA, width: int = 64
     client = _client()
     try:
         world = GraspWorld(client, timestep=1.0 / 240.0)
-        urdf = (objects or objects_dir()) / state.task / "model.urdf"
+        urdf = object_urdf(objects or objects_dir(), state.task)
         try:
             model = world.load_object(state.task, urdf)
         except FileNotFoundError as error:

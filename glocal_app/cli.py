@@ -19,7 +19,7 @@ from glocal_app.benches.transfer import INITIAL_POLICY, PROFILE_RECIPE, TRANSFER
 from glocal_app.nodes import NODES
 from glocal_ros.curriculum.codes import STRATEGY_NAMES
 from glocal_ros.curriculum.learner import paper_threshold, passes_threshold
-from glocal_ros.paths import assets_dir, objects_dir
+from glocal_ros.paths import assets_dir, object_urdf, objects_dir
 from glocal_ros.tasks import parse_task_list, sorted_tasks
 from learner_node.prior import PriorConfig
 from learner_node.profiles import DEFAULT_PROFILE, PROFILES, learner_profile
@@ -798,7 +798,7 @@ def main(argv: list[str] | None = None) -> int:
         parser.error("assets check: --check-episodes must be at least 1")
     if args.command == "train-prior" and not 0 <= args.min_steps <= args.steps:
         parser.error(f"train-prior: --min-steps {args.min_steps} must lie between 0 and --steps {args.steps}")
-    if args.command == "train-prior" and args.objects_dir and not (args.objects_dir / "A0" / "model.urdf").is_file():
+    if args.command == "train-prior" and args.objects_dir and not object_urdf(args.objects_dir, "A0").is_file():
         parser.error(f"train-prior: {args.objects_dir} holds no A0/model.urdf (the layout `assets generate` writes)")
     if args.command == "collect-experience" and args.store is None:
         args.store = assets_dir() / "priors"

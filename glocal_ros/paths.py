@@ -38,6 +38,11 @@ def objects_dir() -> Path:
     return assets_dir() / "objects"
 
 
+def object_urdf(objects: Path, task: str) -> Path:
+    """The URDF of ``task``'s object in the object set ``objects`` (the layout `assets generate` writes)."""
+    return Path(objects) / task / "model.urdf"
+
+
 def ros_home() -> Path:
     """``$ROS_HOME``, ``~/.ros`` when unset (as ROS 2 itself decides): where nodes keep state by default."""
     return Path(os.environ.get("ROS_HOME", Path.home() / ".ros"))

@@ -65,6 +65,7 @@ import pybullet
 from gymnasium import spaces
 from pybullet_utils.bullet_client import BulletClient
 
+from glocal_ros.paths import object_urdf
 from glocal_ros.sim_contract import DEFAULT_EPISODE_STEPS
 from glocal_ros.spaces import ACTION_DIM, OBS_DIM, PHYSICS_TIMESTEP, SUBSTEPS
 from glocal_ros.tasks import NUM_TASKS, PRIOR_TASK, task_index
@@ -331,7 +332,7 @@ class GraspEnv(gym.Env[np.ndarray, np.ndarray]):
             self._client = None
 
     def _urdf_path(self, task: str) -> Path:
-        return self.objects_dir / task / "model.urdf"
+        return object_urdf(self.objects_dir, task)
 
     def _observe(self) -> np.ndarray:
         robot = self.world.robot

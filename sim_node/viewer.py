@@ -33,6 +33,7 @@ from std_msgs.msg import String
 from tf2_msgs.msg import TFMessage
 from visualization_msgs.msg import Marker
 
+from glocal_ros.paths import object_urdf
 from glocal_ros.transforms import Transform
 from glocal_ros.urdf import RobotModel, parse_urdf
 from node_common import names, qos
@@ -116,7 +117,7 @@ class ViewerPublisher:
     def publish(self, snapshot: EnvSnapshot, env_index: int, joint_names: list[str], stamp: Time) -> None:
         """Every viewer topic for the state in ``snapshot``, stamped ``stamp``."""
         if snapshot.task != self._marker_task:
-            self._marker_pub.publish(object_marker(self._objects_dir / snapshot.task / "model.urdf", stamp))
+            self._marker_pub.publish(object_marker(object_urdf(self._objects_dir, snapshot.task), stamp))
             self._marker_task = snapshot.task
         world = {link: Transform.of(*pose) for link, pose in snapshot.link_poses.items()}
         transforms = [transform_msg(joint.parent, joint.child, world[joint.parent].inverse() * world[joint.child],

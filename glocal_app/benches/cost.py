@@ -273,8 +273,7 @@ def held_cost_map(work_dir: Path, objects_dir: Path | None = None,
     except (KeyError, TypeError):
         raise ValueError(f"{Path(work_dir) / GOALS_FILE}, line 1: not a goal of bench cost (its key lacks "
                          "the settings)") from None
-    goals = finished_goals(work_dir, settings, profile, prior_store)
-    return settings, [goals[goal] for goal in sorted(goals, key=lambda goal: (grid_coordinates(goal[0]), goal[1]))]
+    return settings, list(finished_goals(work_dir, settings, profile, prior_store).values())
 
 
 @contextmanager

@@ -61,6 +61,7 @@ from typing import Callable, Sequence
 
 from glocal_ros.curriculum.learner import PAPER_THRESHOLD_FRACTION, passes_threshold
 from learner_node.profiles import DEFAULT_PROFILE, learner_profile
+from glocal_ros.paths import object_urdf
 from glocal_ros.seeds import MAX_SEED
 from glocal_ros.tasks import validate_tasks
 
@@ -264,7 +265,7 @@ def check_goals(recipes: Sequence[str], priors: Sequence[str], prior_store: Path
     validate_tasks(list(tasks))
     settings.check()
     if settings.objects_dir is not None:
-        missing = [task for task in tasks if not (settings.objects_dir / task / "model.urdf").is_file()]
+        missing = [task for task in tasks if not object_urdf(settings.objects_dir, task).is_file()]
         if missing:
             raise ValueError(f"{settings.objects_dir} holds no model.urdf for {', '.join(missing)} (the layout "
                              "`assets generate` writes: <TASK>/model.urdf)")
