@@ -40,8 +40,10 @@ from node_common import names, qos
 from node_common.params import declare
 from node_common.runner import spin_node
 
-#: The most a stopping node waits for its subscribers to have its latest state and assignment.
-DRAIN_SEC = 10.0
+#: The most a stopping node waits, per publisher, first for the subscribers the graph lists to
+#: match, then for them to acknowledge its latest state and assignment. Each wait has its own
+#: budget: a slow match on a loaded machine must not leave none for the acknowledgement.
+DRAIN_SEC = 20.0
 
 _DEFAULTS = {f.name: f.default for f in fields(RunConfig) if f.default is not MISSING}
 
@@ -133,14 +135,17 @@ class CurriculumNode(Node):
 
     def drain(self) -> None:
         """Deliver the latest state and assignment to every subscriber the graph lists (at most
-        ``DRAIN_SEC``), on Ctrl-C as at the end: a recorder that has not matched this node's
+        ``DRAIN_SEC`` to match and ``DRAIN_SEC`` to acknowledge), on Ctrl-C as at the end: a recorder that has not matched this node's
         publishers yet (a loaded machine) would otherwise close its bag without them."""
-        deadline = time.monotonic() + DRAIN_SEC
         for publisher in (self.state_pub, self.assignment_pub):
+            deadline = time.monotonic() + DRAIN_SEC
             while (publisher.get_subscription_count() < self.count_subscribers(publisher.topic_name)
                    and time.monotonic() < deadline):
                 time.sleep(0.05)
-            publisher.wait_for_all_acked(Duration(seconds=max(0.0, deadline - time.monotonic())))
+            if not publisher.wait_for_all_acked(Duration(seconds=DRAIN_SEC)):
+                self.get_logger().warning(
+                    f"{publisher.topic_name}: not every subscriber acknowledged the last message within "
+                    f"{DRAIN_SEC:.0f} s; it may miss it")
 
     # RunObserver: what the run reports, published. Replayed decisions were
     # published by the node that made them, so only live ones go out.

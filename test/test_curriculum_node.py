@@ -43,7 +43,8 @@ def test_every_strategy_runs_to_the_end_of_its_budget(graph, ros_node, tmp_path,
     wait_until(lambda: node.process.poll() is not None, 240, f"the {strategy} run", processes=graph)
     assert node.process.returncode == 0, node.log()
 
-    wait_until(lambda: states and states[-1].status == CurriculumState.STATUS_FINISHED, 60, "the final state")
+    wait_until(lambda: states and states[-1].status == CurriculumState.STATUS_FINISHED, 120,
+               f"the final state; the curriculum node's log:\n{node.log()}")
     final = states[-1]
     assert (final.strategy, final.run_id) == (strategy, f"{strategy}-seed0")
     assert final.step_budget == 300 and final.total_steps <= 300, "no goal trains past its budget"
