@@ -577,21 +577,21 @@ def build_parser() -> argparse.ArgumentParser:
     assets = commands.add_parser("assets", help="the object set: generate, import EGAD, check, lifting poses, "
                                      "show, validate")
     asset_commands = assets.add_subparsers(dest="assets_command", required=True)
-    generate = asset_commands.add_parser("generate", help="generate the 49 objects (seeded, about 6 minutes)")
+    generate = asset_commands.add_parser("generate", help="generate the 49 objects (seeded, about 25 minutes)")
     generate.add_argument("--seed", type=int, default=0)
     generate.add_argument("--candidates", type=int, default=1500, help="candidate shapes to bin into the grid")
     generate.add_argument("--workers", type=int, default=2)
-    generate.add_argument("--grid", choices=("measured", "lifting-poses", "geometric"), default="measured",
-                          help="letters from the perturbed grasp in the simulator (measured), from the share of "
-                               "top-down poses that lift each candidate (lifting-poses, slower), or from the "
-                               "geometric difficulty alone")
+    generate.add_argument("--grid", choices=("measured", "lifting-poses", "geometric"), default="lifting-poses",
+                          help="letters from the share of top-down poses that lift each candidate (lifting-poses, "
+                               "the committed set's), from the perturbed grasp in the simulator (measured, "
+                               "faster), or from the geometric difficulty alone")
     generate.add_argument("--per-column", type=_count(7), default=None,
                           help="candidates of each complexity digit tried in the simulator (--grid measured or "
                                "lifting-poses; default: glocal_ros.objects.MeasuredGrid's)")
     # glocal_ros.objects.cppn.ENVELOPES, named here: the object package takes a second to import.
-    generate.add_argument("--envelope", choices=("blob", "wide"), default="blob",
-                          help="base solids: EGAD-like blobs, or wide (blobs, slabs and rods, tapered; "
-                               "glocal_ros/objects/cppn.py)")
+    generate.add_argument("--envelope", choices=("blob", "wide"), default="wide",
+                          help="base solids: wide (blobs, slabs and rods, tapered: the committed set's), or "
+                               "EGAD-like blobs (glocal_ros/objects/cppn.py)")
     generate.set_defaults(func=cmd_assets_generate)
     egad = asset_commands.add_parser("import-egad", help="the same layout from EGAD's A0.obj .. G6.obj")
     egad.add_argument("egad_dir", type=Path)
