@@ -422,20 +422,25 @@ def cmd_bench_cost(args: argparse.Namespace) -> int:
 
 
 def cmd_bench_curriculum(args: argparse.Namespace) -> int:
-    from glocal_app.benches.curriculum import bench_inputs, check_bench, tabulate_curriculum_bench
+    from glocal_app.benches.curriculum import (bench_inputs, check_bench, keep_finished_runs, keep_run,
+                                               kept_runs_dir, restore_kept_runs, tabulate_curriculum_bench)
 
     command = "glocal-ros " + " ".join(sys.argv[1:])
+    keep = args.keep or kept_runs_dir(args.results)
     code = 0
     if not args.tabulate:
-        check_bench(args.strategies, args.seeds, args.preset, args.out, args.budget, args.profile)
+        check_bench(args.strategies, args.seeds, args.preset, args.out, args.budget, args.profile, keep)
         bench_inputs(args.out, args.merge)  # a --merge that holds no run is refused before the first run
         from glocal_app.launch import experiment
 
+        for run_dir in restore_kept_runs(keep, args.out):
+            print(f"{run_dir.name}: restored from {keep}")
         code = experiment(args.strategies, args.seeds, args.preset, args.out, step_budget=args.budget, report=False,
-                          learner_profile=args.profile)
+                          learner_profile=args.profile, finished=lambda run_dir: keep_run(run_dir, keep))
+        keep_finished_runs(args.out, keep)  # runs that finished before this command
         if code == 130:  # interrupted: the same command resumes
             return code
-    report = tabulate_curriculum_bench(bench_inputs(args.out, args.merge), command, args.results)
+    report = tabulate_curriculum_bench(bench_inputs(args.out, args.merge, keep), command, args.results)
     write_bench_report(report, args.results)
     return code
 
@@ -726,9 +731,12 @@ def build_parser() -> argparse.ArgumentParser:
     bench_curriculum.add_argument("--merge", type=Path, nargs="+", default=[], metavar="DIR",
                                   help="more runs for the table: run directories, or other benches' --out")
     bench_curriculum.add_argument("--tabulate", action="store_true",
-                                  help="run nothing: tabulate the runs of --out and --merge")
+                                  help="run nothing: tabulate the runs of --out, --keep and --merge")
     bench_curriculum.add_argument("--results", type=Path, default=DEFAULT_RESULTS,
                                   help="the table; the report's figures go to a folder of its name beside it")
+    bench_curriculum.add_argument("--keep", type=Path, default=None,
+                                  help="where each finished run is kept, small enough to commit, and restored from "
+                                       "into --out (default: beside --results, curriculum.md -> curriculum-runs)")
     add_profile_argument(bench_curriculum, default=None)
     bench_curriculum.set_defaults(func=cmd_bench_curriculum)
 

@@ -41,7 +41,7 @@ import json
 import signal
 import time
 from pathlib import Path
-from typing import Sequence
+from typing import Callable, Sequence
 
 import rclpy
 from glocal_interfaces.msg import CurriculumState, EpisodeRecord, TrainingProgress
@@ -50,7 +50,7 @@ from rclpy.signals import SignalHandlerOptions
 
 from glocal_app.processes import (NodeProcess, check_run_dir, claim_run_dir, isolated_environment,
                                    namespace_arguments, new_bag_path, normalize_namespace, preset_file,
-                                   preset_parameters, run_parameters, run_settings)
+                                   preset_parameters, run_parameters, run_settings, STATE_FILE)
 from glocal_ros.curriculum.codes import STRATEGY_NAMES
 from glocal_ros.domain import choose_domain_id
 from glocal_ros.recording import message_counts
@@ -126,7 +126,7 @@ def describe(state: CurriculumState) -> str:
 
 
 def run_finished(run_dir: Path) -> bool:
-    state = run_dir / "curriculum" / "state.json"
+    state = run_dir / STATE_FILE
     return state.is_file() and json.loads(state.read_text())["status"] == CurriculumState.STATUS_FINISHED
 
 
@@ -386,11 +386,12 @@ def check_experiment(strategies: Sequence[str], seeds: Sequence[int], preset: st
 
 def experiment(strategies: Sequence[str], seeds: Sequence[int], preset: str, out: Path, namespace: str = "",
                use_sim_time: bool = False, step_budget: int | None = None, report: bool = True,
-               learner_profile: str | None = None) -> int:
+               learner_profile: str | None = None, finished: Callable[[Path], object] | None = None) -> int:
     """Every strategy x seed as its own run under ``out``; finished runs are kept, others (re)launched.
 
     The runs go one after another, each with ``launch``'s namespace, sim time and domain choice,
     after ``check_experiment`` passed; then one report over all of them (unless ``report`` is off).
+    ``finished(run_dir)`` is called as each launched run finishes.
     """
     check_experiment(strategies, seeds, preset, out, step_budget, namespace, learner_profile)
     run_dirs, failed = [], []
@@ -405,6 +406,8 @@ def experiment(strategies: Sequence[str], seeds: Sequence[int], preset: str, out
             return code
         if code:
             failed.append(run_dir.name)
+        elif finished is not None and run_finished(run_dir):
+            finished(run_dir)
     if report:
         write_run_report(run_dirs, out / "report")
     if failed:

@@ -35,6 +35,8 @@ RUN_NODES = ("recorder_node", "sim_node", "learner_node", "curriculum_node")
 SIM_TIME_NODES = ("sim_node", "recorder_node")
 #: What records which run a run directory holds (``claim_run_dir``).
 RUN_FILE = "run.json"
+#: Where a run directory holds the curriculum's latest state (its journal beside it).
+STATE_FILE = Path("curriculum") / "state.json"
 _NAMESPACE_TOKEN = re.compile(r"[A-Za-z_][A-Za-z0-9_]*")
 
 
@@ -167,7 +169,7 @@ def run_parameters(strategy: str, seed: int, run_dir: Path, bag: Path, use_sim_t
         "recorder_node": {"output": str(bag), **sim_time},
         "sim_node": {"seed": seed, **sim_time},
         "learner_node": {"seed": seed, "policy_dir": str(run_dir / "policies"), **profile},
-        "curriculum_node": {"strategy": strategy, "seed": seed, "state_dir": str(run_dir / "curriculum"),
+        "curriculum_node": {"strategy": strategy, "seed": seed, "state_dir": str(run_dir / STATE_FILE.parent),
                             **budget},
     }
 

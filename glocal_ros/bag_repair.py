@@ -1,4 +1,4 @@
-"""Repairing the bag of a recorder that was killed (SIGKILL, power loss, OOM).
+"""Repairing the bag of a recorder that was killed (SIGKILL, power loss, OOM), and copying part of a bag.
 
 Such a bag has MCAP files without summary and footer, and no metadata.yaml
 (rosbags writes both on close), so no reader accepts it. Every record that
@@ -14,7 +14,11 @@ What is lost: the recorder's writer keeps the chunk being filled in memory
 until its next flush (every few seconds, or 1 MiB of messages), so the
 messages after the last complete chunk never reached the disk. The space
 the recorder reserved for closing (``RESERVE_FILE``) is freed first: a disk
-that filled up then has room for the repaired copy. ROS-free.
+that filled up then has room for the repaired copy.
+
+``copy_topics`` writes the same way a new bag holding only some topics of an
+intact one (a benchmark keeps a run's curriculum and learner topics, a few
+hundred kilobytes, where the whole bag is tens of megabytes). ROS-free.
 """
 
 from __future__ import annotations
@@ -23,7 +27,7 @@ import shutil
 import tempfile
 from dataclasses import dataclass, field
 from pathlib import Path, PurePath
-from typing import BinaryIO, Iterator
+from typing import BinaryIO, Callable, Iterator
 
 from mcap.records import Channel, Chunk, Message, Schema
 from mcap.stream_reader import StreamReader, breakup_chunk
@@ -36,6 +40,8 @@ from rosbags.typesys import Stores, get_types_from_idl, get_types_from_msg, get_
 from glocal_ros.recording import RESERVE_FILE, Rosbag2Writer
 
 DAMAGED_SUFFIX = ".damaged"
+#: The channel of a topic that ``copy_topics`` leaves out.
+_LEFT_OUT = object()
 _IDL_SEPARATOR = "=" * 80 + "\n"
 
 
@@ -136,17 +142,48 @@ def _records(stream: BinaryIO, recovery: _Recovery) -> Iterator[Schema | Channel
     recovery.dropped_bytes += size - good_end
 
 
-def _recover_file(path: Path, recovery: _Recovery) -> None:
+def copy_topics(bag: Path, destination: Path, keep: Callable[[str], bool]) -> dict[str, int]:
+    """Write a new bag at ``destination`` with the messages of ``bag``'s topics that ``keep`` accepts, as
+    they were recorded (definitions, QoS profiles, log and publish times); the messages copied per topic.
+
+    ``ValueError`` for a bag that is not intact (repair it first) and for a ``destination`` that exists.
+    """
+    bag, destination = Path(bag), Path(destination)
+    if not bag_is_intact(bag):
+        raise ValueError(f"{bag} is not an intact MCAP rosbag2 bag (glocal-ros bag repair first)")
+    if destination.exists():
+        raise ValueError(f"{destination} exists: a copy never overwrites")
+    writer = Rosbag2Writer(destination)
+    copy = _Recovery(writer)
+    try:
+        writer.open()
+        for path in mcap_files(bag):
+            _recover_file(path, copy, keep)
+        writer.close()
+    except BaseException:
+        writer.abort()
+        shutil.rmtree(destination, ignore_errors=True)
+        raise
+    return dict(copy.counts)
+
+
+def _recover_file(path: Path, recovery: _Recovery, keep: Callable[[str], bool] | None = None) -> None:
+    """Write every message of ``path`` (of a topic ``keep`` accepts, when given) through ``recovery``."""
     schemas: dict[int, Schema] = {}
-    channels: dict[int, Connection | None] = {}  # None: a channel without schema
+    channels: dict[int, object] = {}  # a Connection; None: a channel without schema; _LEFT_OUT: not copied
     with path.open("rb") as stream:
         for record in _records(stream, recovery):
             if isinstance(record, Schema):
                 schemas[record.id] = record
             elif isinstance(record, Channel):
-                channels[record.id] = _connection(record, schemas.get(record.schema_id), recovery)
+                if keep is None or keep(record.topic):
+                    channels[record.id] = _connection(record, schemas.get(record.schema_id), recovery)
+                else:
+                    channels[record.id] = _LEFT_OUT
             else:
                 connection = channels.get(record.channel_id)
+                if connection is _LEFT_OUT:
+                    continue
                 if connection is None:
                     recovery.skipped_messages += 1
                     continue

@@ -2,24 +2,27 @@
 
 The table tests read real MCAP bags written with the recorder's writer (test_report's synthetic
 runs: the curriculum states a run publishes); the last test runs two strategies of the smoke
-preset through the whole graph and resumes them.
+preset through the whole graph, keeps them, and restores them on a bench that lacks them.
 """
 
 from __future__ import annotations
 
 import json
+import shutil
 import subprocess
 import sys
 from pathlib import Path
 
 import pytest
+from rosbags.rosbag2 import Reader
 
 from conftest import REPO
-from glocal_app.benches.curriculum import PAPER_LEARNED_AT_4M
-from glocal_app.processes import RUN_FILE, run_settings
+from glocal_app.benches.curriculum import KEPT_TOPICS, PAPER_LEARNED_AT_4M
+from glocal_app.processes import RUN_FILE, STATE_FILE, run_settings
 from glocal_ros.analysis.report import p_value_cell
 from glocal_ros.analysis.runs import welch_p_value
 from glocal_ros.tasks import ALL_TASKS
+from glocal_ros.topics import CURRICULUM_STATE
 from test_launch import graph_env
 from test_report import INTERVAL, PNG_MAGIC, SyntheticRun, glocal_run, write_run
 
@@ -41,6 +44,11 @@ def record(out: Path, run: SyntheticRun, preset: str = "bench") -> Path:
     run_dir = write_run(out / f"{run.strategy}-seed{run.seed}", run)
     (run_dir / RUN_FILE).write_text(json.dumps(run_settings(run.strategy, preset, run.seed)))
     return run_dir
+
+
+def message_counts(bag: Path) -> dict[str, int]:
+    with Reader(bag) as reader:
+        return {connection.topic: connection.msgcount for connection in reader.connections}
 
 
 def milestone_row(table: str, heading: str, first_cell: str) -> list[str]:
@@ -121,6 +129,11 @@ def test_an_out_holding_runs_of_other_settings_is_refused_and_kept(tmp_path):
                    "--results", str(tmp_path / "c.md"))
     assert result.returncode == 2 and f"{stranger} is a run of preset demo" in result.stderr, result.stderr
     assert sorted(path.relative_to(out) for path in out.rglob("*")) == before
+    # The same for the runs a bench keeps: they would be restored into its --out.
+    result = bench("--preset", "smoke", "--strategies", "glocal", "--seeds", "0", "--out", str(tmp_path / "new"),
+                   "--keep", str(out), "--results", str(tmp_path / "c.md"))
+    assert result.returncode == 2 and f"{stranger} is a run of preset demo" in result.stderr, result.stderr
+    assert not (tmp_path / "new").exists()
     experiment = subprocess.run([*CLI, "experiment", "--preset", "smoke", "--strategies", "glocal,random",
                                  "--seeds", "0,7", "--out", str(out)], capture_output=True, text=True, timeout=120,
                                 cwd=REPO, env=graph_env())
@@ -129,7 +142,7 @@ def test_an_out_holding_runs_of_other_settings_is_refused_and_kept(tmp_path):
     assert sorted(path.relative_to(out) for path in out.rglob("*")) == before
 
 
-def test_two_strategies_through_the_graph_then_resumed(tmp_path):
+def test_two_strategies_through_the_graph_kept_then_restored_and_not_run_again(tmp_path):
     out, results = tmp_path / "runs", tmp_path / "results" / "curriculum.md"
     arguments = ["--preset", "smoke", "--strategies", "glocal,random", "--seeds", "0", "--budget", "200",
                  "--out", str(out), "--results", str(results)]
@@ -144,5 +157,23 @@ def test_two_strategies_through_the_graph_then_resumed(tmp_path):
     assert milestone_row(table, "## GloCAL / baseline", "glocal / random")
     assert (results.parent / "curriculum" / "report.md").is_file()
 
+    # Each finished run is kept beside the table, its bags reduced to the curriculum's and learner's topics.
+    kept = results.parent / "curriculum-runs"
+    for strategy in ("glocal", "random"):
+        run, copy = out / f"{strategy}-seed0", kept / f"{strategy}-seed0"
+        assert (copy / RUN_FILE).read_text() == (run / RUN_FILE).read_text()
+        assert (copy / STATE_FILE).read_text() == (run / STATE_FILE).read_text()
+        recorded, copied = message_counts(run / "bag"), message_counts(copy / "bag")
+        assert copied == {topic: n for topic, n in recorded.items() if topic in {spec.name for spec in KEPT_TOPICS}}
+        assert copied[CURRICULUM_STATE.name] > 0 and len(copied) < len(recorded)
+
+    # Another machine: the kept runs, not the runs themselves. Nothing runs again, and the table is the same.
+    shutil.rmtree(out)
+    first_table = table
     again = bench(*arguments, timeout=300)
-    assert again.returncode == 0 and again.stdout.count("finished before") == 2, again.stdout
+    assert again.returncode == 0, again.stdout + again.stderr
+    assert again.stdout.count("restored from") == again.stdout.count("finished before") == 2, again.stdout
+    table = results.read_text()
+    for heading, row in (("## Learned objects at each milestone", "glocal"),
+                         ("## Learned objects at each milestone", "random"), ("## GloCAL / baseline", "glocal / random")):
+        assert milestone_row(table, heading, row) == milestone_row(first_table, heading, row)

@@ -15,8 +15,10 @@ import shutil
 import signal
 import time
 from collections import Counter
+from dataclasses import replace
 from pathlib import Path
 
+import pytest
 from builtin_interfaces.msg import Time
 from glocal_interfaces.msg import CurriculumState, EpisodeRecord
 from rclpy.duration import Duration
@@ -29,8 +31,9 @@ from ruamel.yaml import YAML
 from sensor_msgs.msg import JointState
 
 from conftest import wait_until
-from glocal_ros.bag_repair import repair_bag
+from glocal_ros.bag_repair import copy_topics, repair_bag
 from glocal_ros.recording import BagWriter, graph_typestore
+from glocal_ros.topics import EPISODES, JOINT_STATES
 from node_common import names, qos
 from test_bags import episode
 
@@ -98,6 +101,34 @@ def test_bag_writer_writes_type_hashes_distro_and_both_times_and_repair_keeps_th
     assert {t: hashes[t] for t in ("/glocal/episodes", "/joint_states")} == \
            {t: read_mcap(bag)[0][t][1]["topic_type_hash"] for t in ("/glocal/episodes", "/joint_states")}
     assert sorted(read_mcap(killed)[1]) == sorted(messages)
+
+
+def test_a_copy_of_some_topics_keeps_their_messages_as_recorded_and_refuses_what_it_cannot_copy(tmp_path):
+    bag = tmp_path / "bag"
+    # Named as a recorder under a namespace names them.
+    writer = BagWriter(bag, [replace(spec, name=f"/robot1{spec.name}") for spec in (EPISODES, JOINT_STATES)])
+    writer.write("/robot1/glocal/episodes", 2_000_000_000, serialize_message(episode(0)),
+                 publish_time_ns=1_500_000_000)
+    writer.write("/robot1/joint_states", 3_000_000_000, serialize_message(JointState(name=["a"], position=[0.5])))
+    writer.write("/robot1/glocal/episodes", 4_000_000_000, serialize_message(episode(1)))
+    writer.flush()
+    killed = tmp_path / "killed"
+    shutil.copytree(bag, killed)
+    writer.close()
+
+    copy = tmp_path / "copy" / "bag"
+    assert copy_topics(bag, copy, lambda topic: topic.endswith("/glocal/episodes")) == {"/robot1/glocal/episodes": 2}
+    channels, messages, _ = read_mcap(copy)
+    assert sorted(messages) == [("/robot1/glocal/episodes", 2_000_000_000, 1_500_000_000),
+                                ("/robot1/glocal/episodes", 4_000_000_000, 4_000_000_000)]
+    assert channels == {topic: value for topic, value in read_mcap(bag)[0].items() if topic in channels}
+    assert_as_rosbag2_jazzy_writes(copy)
+
+    with pytest.raises(ValueError, match="exists: a copy never overwrites"):
+        copy_topics(bag, copy, lambda topic: True)
+    with pytest.raises(ValueError, match="is not an intact MCAP rosbag2 bag"):
+        copy_topics(killed, tmp_path / "from-killed", lambda topic: True)
+    assert not (tmp_path / "from-killed").exists()
 
 
 def records_on_disk(mcap: Path) -> list[tuple[str, int]]:

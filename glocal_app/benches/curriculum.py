@@ -24,18 +24,31 @@ together, provided they share the tasks and the budget. It has:
   beside the table in ``curriculum/``).
 
 Before any node starts, ``check_bench`` refuses unknown strategies, a budget
-below one evaluation, and an OUT that holds runs of other settings (another
-preset or budget): they would be mixed into the table.
+below one evaluation, and an OUT or KEEP that holds runs of other settings
+(another preset or budget): they would be mixed into the table.
+
+Kept runs. A bench takes hours and OUT (tens of megabytes per run, in
+``runs/``) is not something to commit. Each finished run is therefore kept,
+as it finishes, in KEEP (by default beside the table: ``curriculum.md`` ->
+``curriculum-runs/``): its ``run.json``, its curriculum state and its bags
+reduced to the curriculum's and the learner's topics (``KEPT_TOPICS``, a few
+hundred kilobytes), which is all the table and the report's figures read.
+A bench started where OUT lacks a kept run copies it into OUT first, so it
+counts as finished and is not run again: commit KEEP, and a bench stopped on
+one machine goes on from its last finished run on another.
 """
 
 from __future__ import annotations
 
+import shutil
 import statistics
+import tempfile
 from dataclasses import dataclass
 from pathlib import Path
 from typing import TYPE_CHECKING, Sequence
 
-from glocal_app.processes import RUN_FILE, recorded_run_settings
+from glocal_app.processes import RUN_FILE, STATE_FILE, recorded_run_settings
+from glocal_ros import topics
 from glocal_ros.tasks import NUM_TASKS
 
 if TYPE_CHECKING:
@@ -52,21 +65,32 @@ PAPER_LEARNED_AT_4M = {"glocal": 49, "random": 41, "alp_gmm_250": 41, "alp_gmm_1
                        "glocal_random_cluster": 10}
 
 
+#: What a kept run's bags hold: what the table and the figures read (the curriculum's state and
+#: assignments), and the learner's evaluations and progress.
+KEPT_TOPICS = (topics.CURRICULUM_STATE, topics.TASK_ASSIGNMENT, topics.EVALUATIONS, topics.TRAINING_PROGRESS)
+
+
+def kept_runs_dir(results: Path) -> Path:
+    """Where a bench keeps its finished runs unless told: beside its table (``curriculum.md`` -> ``curriculum-runs``)."""
+    return results.with_name(f"{results.stem}-runs")
+
+
 def bench_run_dirs(out: Path) -> list[Path]:
     """The run directories of a bench's OUT (each with a ``run.json``), or OUT itself when it is one run."""
     if (out / RUN_FILE).is_file():
         return [out]
-    return sorted(path.parent for path in out.glob(f"*/{RUN_FILE}"))
+    # A folder whose name starts with a dot is a copy being made (``keep_run``).
+    return sorted(path.parent for path in out.glob(f"*/{RUN_FILE}") if not path.parent.name.startswith("."))
 
 
 def check_bench(strategies: Sequence[str], seeds: Sequence[int], preset: str, out: Path,
-                step_budget: int | None, learner_profile: str | None = None) -> None:
-    """``ValueError`` for what ``experiment`` refuses, and for any run under OUT of another preset, budget or
-    learner profile."""
+                step_budget: int | None, learner_profile: str | None = None, keep: Path | None = None) -> None:
+    """``ValueError`` for what ``experiment`` refuses, and for any run under OUT or ``keep`` of another preset,
+    budget or learner profile."""
     from glocal_app.launch import check_experiment
 
     check_experiment(strategies, seeds, preset, out, step_budget, learner_profile=learner_profile)
-    for run_dir in bench_run_dirs(out):
+    for run_dir in bench_run_dirs(out) + (bench_run_dirs(keep) if keep is not None else []):
         found = recorded_run_settings(run_dir) or {}
         wanted = (preset, step_budget, learner_profile)
         if (found.get("preset"), found.get("step_budget"), found.get("learner_profile")) != wanted:
@@ -74,7 +98,7 @@ def check_bench(strategies: Sequence[str], seeds: Sequence[int], preset: str, ou
                              f"{found.get('step_budget') or 'of its preset'} and learner profile "
                              f"{found.get('learner_profile') or 'of its preset'}, not of preset {preset}, budget "
                              f"{step_budget or 'of its preset'} and learner profile "
-                             f"{learner_profile or 'of its preset'}: choose another --out")
+                             f"{learner_profile or 'of its preset'}: choose another --out or --keep")
 
 
 def read_bench_runs(run_dirs: Sequence[Path]) -> list[RunData]:
@@ -215,12 +239,60 @@ def tabulate_curriculum_bench(run_dirs: Sequence[Path], command: str, results: P
     return curriculum_bench_report(runs, command, figures_report)
 
 
-def bench_inputs(out: Path, merge: Sequence[Path]) -> list[Path]:
-    """OUT's run directories and those of ``merge`` (each a run directory or another bench's OUT), once each."""
-    run_dirs: list[Path] = []
-    for source in (out, *merge):
+def bench_inputs(out: Path, merge: Sequence[Path], keep: Path | None = None) -> list[Path]:
+    """OUT's run directories, the runs kept in ``keep`` that OUT lacks, and those of ``merge`` (each a run
+    directory or another bench's OUT), once each."""
+    run_dirs = bench_run_dirs(out)
+    if keep is not None:
+        run_dirs += [d for d in bench_run_dirs(keep) if not (out / d.name).exists()]
+    for source in merge:
         found = bench_run_dirs(source)
-        if source != out and not found:
+        if not found:
             raise ValueError(f"{source} holds no run (no run.json in it or its subdirectories)")
         run_dirs += [d for d in found if d.resolve() not in {r.resolve() for r in run_dirs}]
     return run_dirs
+
+
+def keep_run(run_dir: Path, keep: Path) -> Path | None:
+    """Keep the finished run ``run_dir`` in ``keep`` (see the module's docstring); None when it is kept already.
+
+    The copy is made in a folder beside and renamed in, so a kept run is whole or absent.
+    """
+    from glocal_ros.bag_repair import copy_topics
+    from glocal_ros.analysis.runs import find_bags
+    from glocal_ros.recording import table_topic
+
+    destination = keep / run_dir.name
+    if destination.exists():
+        return None
+    keep.mkdir(parents=True, exist_ok=True)
+    staging = Path(tempfile.mkdtemp(prefix=f".{run_dir.name}.", dir=keep))
+    try:
+        shutil.copy2(run_dir / RUN_FILE, staging / RUN_FILE)
+        (staging / STATE_FILE).parent.mkdir(parents=True)
+        shutil.copy2(run_dir / STATE_FILE, staging / STATE_FILE)
+        for bag in find_bags(run_dir):
+            copy_topics(bag, staging / bag.name, lambda topic: table_topic(topic, KEPT_TOPICS) is not None)
+        staging.rename(destination)
+    except BaseException:
+        shutil.rmtree(staging, ignore_errors=True)
+        raise
+    return destination
+
+
+def keep_finished_runs(out: Path, keep: Path) -> list[Path]:
+    """Keep every finished run of OUT that ``keep`` lacks; the copies made."""
+    from glocal_app.launch import run_finished
+
+    return [kept for run_dir in bench_run_dirs(out) if run_finished(run_dir)
+            if (kept := keep_run(run_dir, keep)) is not None]
+
+
+def restore_kept_runs(keep: Path, out: Path) -> list[Path]:
+    """Copy into OUT the runs kept in ``keep`` that it lacks, so that they count as finished there."""
+    restored = []
+    for kept in bench_run_dirs(keep):
+        if not (out / kept.name).exists():
+            shutil.copytree(kept, out / kept.name)
+            restored.append(out / kept.name)
+    return restored
