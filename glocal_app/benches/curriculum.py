@@ -276,6 +276,8 @@ def keep_run(run_dir: Path, keep: Path) -> Path | None:
         staging.rename(destination)
     except BaseException:
         shutil.rmtree(staging, ignore_errors=True)
+        if destination.is_dir():  # another bench kept it meanwhile
+            return None
         raise
     return destination
 
