@@ -49,9 +49,11 @@ loaded from SB3's zip did (``test/test_model_files.py`` compares the two):
   ``start_time``): SB3 logs them, nothing here reads them;
 - the replay buffer: a goal's checkpoint and the prior's keep it beside the
   model (``learner_node.replay_buffer``), as with SB3.
-The key and the action space are seeded again with the model's seed after
-the networks are built (building splits the one and samples the other), so
-they are in the state SB3's load leaves them in.
+Building the networks takes an example observation and action: they come
+from stand-in spaces that give zeros, so loading draws from no random
+generator, as SB3's load drew none; the key and the action space are seeded
+again with the model's seed after the networks are built, so they are in the
+state SB3's load leaves them in.
 
 ``load_pickled_model`` reads SB3's zip, the format before this one. It
 unpickles, so it runs whatever code the file holds: it is only for ``glocal-ros
@@ -77,7 +79,6 @@ FORMAT_VERSION = 1
 METADATA = "metadata"
 #: The only model SBX's SAC this format holds: the policy of ``SAC("MlpPolicy", ...)``.
 POLICY = "MlpPolicy"
-_POLICY_CLASS = "sbx.sac.policies.SACPolicy"
 #: The train states and keys stored as arrays: (owner, attribute) -> the prefix of their arrays' names.
 _STATES = {("policy", "actor_state"): "actor_state", ("policy", "qf_state"): "qf_state",
            ("model", "ent_coef_state"): "ent_coef_state", ("policy", "key"): "policy/key",
@@ -137,6 +138,8 @@ def model_arrays(model) -> tuple[Arrays, dict[str, Any]]:
     python_scalars, weak_typed = [], []
     for prefix, tree in _state_trees(model).items():
         for name, leaf in _leaves(prefix, tree):
+            if name in arrays:  # a key with a "/" in it would make two paths one name
+                raise ValueError(f"two leaves of the model's state are both named {name!r}")
             array, python_scalar, weak = _as_array(leaf)
             arrays[name] = array
             if python_scalar:
@@ -238,7 +241,7 @@ def load_model(path, env=None):
         _set_states(model, arrays, metadata)
     except KeyError as error:
         raise ValueError(f"{path}: the metadata lacks {error}") from error
-    except (ValueError, TypeError, AssertionError) as error:
+    except (ValueError, TypeError, AssertionError, OverflowError) as error:  # SB3's and SBX's own checks too
         raise ValueError(f"{path}: {error}") from error
     share_compiled_code(model)
     return model
@@ -295,20 +298,35 @@ def _rebuilt(arrays: Arrays, metadata: dict[str, Any], env):
         attributes["n_envs"] = env.num_envs
     model = SAC(POLICY, env, device="cpu", _init_setup_model=False)
     frequency, unit = metadata["train_freq"]
-    model.__dict__.update(attributes, train_freq=(frequency, unit))
+    # Building the networks takes an example observation and action for their shapes, which SB3's load (the
+    # networks unpickled) never drew: stand-ins give zeros, so no random generator moves.
+    model.__dict__.update(attributes, train_freq=(frequency, unit),
+                          **{name: _stand_in(attributes[name]) for name in _SPACES})
     model._setup_model()
+    for owner in (model, model.policy, model.replay_buffer):
+        for name in _SPACES:
+            setattr(owner, name, attributes[name])
     rate = metadata["entropy_learning_rate"]
     if type(rate) is not float:
         raise ValueError(f"entropy_learning_rate {rate!r} is not a number")
     model.ent_coef_state = model.ent_coef_state.replace(tx=optax.adam(learning_rate=rate))
     if model.seed is not None:
-        # As SB3's load leaves them (``set_random_seed`` in ``_setup_model``, which found the unpickled
-        # networks there): building the networks split the key and drew a sample from the action space.
+        # As SB3's load leaves them (``set_random_seed`` in ``_setup_model``, which found the unpickled networks
+        # there): here building the networks split the key after, and the stand-in action space was seeded.
         model.key = jax.random.PRNGKey(model.seed)
         model.action_space.seed(model.seed)
-    if _class_name(model.policy) != _POLICY_CLASS:
-        raise ValueError(f"the policy was built as {_class_name(model.policy)}")
     return model
+
+
+def _stand_in(space):
+    """A Box of ``space``'s bounds whose samples are zeros, drawn from no generator."""
+    from gymnasium import spaces
+
+    class Zeros(spaces.Box):
+        def sample(self, *args, **kwargs) -> np.ndarray:
+            return np.zeros(self.shape, self.dtype)
+
+    return Zeros(low=space.low, high=space.high, shape=space.shape, dtype=space.dtype)
 
 
 def _space(described: dict[str, Any], arrays: Arrays, name: str):
@@ -353,7 +371,6 @@ def _set_states(model, arrays: Arrays, metadata: dict[str, Any]) -> None:
         setattr(owners[owner], attribute, jax.tree_util.tree_unflatten(jax.tree_util.tree_structure(fresh), leaves))
     if remaining:
         raise ValueError(f"arrays the network the metadata describes does not have: {sorted(remaining)}")
-    model.actor, model.qf = model.policy.actor, model.policy.qf
 
 
 def _names(metadata: dict[str, Any], key: str, arrays: Arrays) -> set[str]:
