@@ -40,7 +40,7 @@ METADATA_FILE = "policy.json"
 _NAME = re.compile(r"^[A-Za-z0-9_][A-Za-z0-9_.-]{0,127}$")
 #: The only model file names a store writes: a policy.json naming anything else (``../x``, an
 #: absolute path) would make a load read outside the store.
-MODEL_FILE = re.compile(r"^model-([1-9][0-9]{0,17})\.npz$")
+_MODEL_FILE = re.compile(r"^model-([1-9][0-9]{0,17})\.npz$")
 #: A model file of the format before (SB3's zip, pickles): listed, never loaded.
 _PICKLED_MODEL_FILE = re.compile(r"^model-([1-9][0-9]{0,17})\.zip$")
 _EXPERIENCE_FILE = re.compile(r"^experience-[1-9][0-9]{0,17}\.npz$")
@@ -115,7 +115,7 @@ class PolicyStore:
             record = PolicyRecord(**{"observation_layout": 1, **fields})
         except (ValueError, TypeError) as error:  # not JSON (e.g. a pickle), or not a record's fields
             raise ValueError(f"{path}: not a policy record ({error})") from error
-        if record.model_file and not (MODEL_FILE.match(record.model_file)
+        if record.model_file and not (_MODEL_FILE.match(record.model_file)
                                       or _PICKLED_MODEL_FILE.match(record.model_file)):
             raise ValueError(f"{path}: model_file {record.model_file!r} is not a model file of this store "
                              f"(model-<N>.npz): refusing to load it")
@@ -204,5 +204,5 @@ class PolicyStore:
 
 def _version(model_file: str) -> int:
     """The version of a model file name of the store (0: none), of either format."""
-    match = MODEL_FILE.match(model_file) or _PICKLED_MODEL_FILE.match(model_file)
+    match = _MODEL_FILE.match(model_file) or _PICKLED_MODEL_FILE.match(model_file)
     return int(match.group(1)) if match else 0

@@ -13,11 +13,12 @@ order of one step); around it:
   stops when learned checks before its first step too, as "train until
   S > B" does, and stores the initial policy unchanged when it passes;
 - a checkpoint (model, replay buffer, progress, the random generators'
-  states; arrays and JSON, nothing pickled) every ``checkpoint_interval`` steps, so that the same goal sent
-  again after a crash continues from it; at a checkpoint every running
-  episode is cut and new ones start, from a seed derived from the step for a
-  seeded goal, so that a resumed goal goes on exactly as the uninterrupted
-  one (the sim's episodes in flight cannot be saved);
+  states; arrays and JSON, nothing pickled) every ``checkpoint_interval``
+  steps, so that the same goal sent again after a crash continues from it;
+  at a checkpoint every running episode is cut and new ones start, from a
+  seed derived from the step for a seeded goal, so that a resumed goal goes
+  on exactly as the uninterrupted one (the sim's episodes in flight cannot
+  be saved);
 - the trained model is written to the policy store only when the goal ends
   by itself (budget spent, learned or its episodes done), never half-way; the goal's outcome is
   kept, so the same goal sent again (its client restarted and lost the
@@ -66,8 +67,8 @@ from glocal_ros.sim_contract import BatchStepper
 from glocal_ros.tasks import validate_tasks
 from learner_node.evaluation import BatchPolicy, Score, evaluate
 from learner_node.fine_tuning import goal_start_actor, start_fine_tuning
-from learner_node.policies import RANDOM_POLICY, PolicyRegistry
 from learner_node.model_files import load_model, write_model
+from learner_node.policies import RANDOM_POLICY, PolicyRegistry
 from learner_node.policy_store import PolicyRecord, check_name
 from learner_node.replay_buffer import add_experience, load_replay_buffer, recent_experience, save_replay_buffer
 from learner_node.profiles import DEFAULT_PROFILE, PROFILES, LearnerProfile
