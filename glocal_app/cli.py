@@ -520,6 +520,57 @@ def cmd_collect_experience(args: argparse.Namespace) -> int:
     return 0
 
 
+def cmd_policy_import(args: argparse.Namespace) -> int:
+    """Convert a policy of stable-baselines3's zip (the format before arrays and JSON) into a store: loading the
+    zip unpickles it, which runs whatever code it holds, so only with ``--trust``.
+
+    A zip that is the model of a store's policy (its folder's policy.json names it) keeps that record (task,
+    steps, scores, profile, layout, extra) and experience; a bare zip becomes a policy of ``--profile`` on the
+    sim's observation layout, named ``--name``.
+    """
+    from learner_node.model_files import load_pickled_model
+    from learner_node.policy_store import PolicyRecord, PolicyStore, check_name
+    from learner_node.replay_buffer import load_experience
+
+    if not args.trust:
+        raise ValueError(f"importing {args.zip} unpickles it, which runs any code it holds: pass --trust only for "
+                         "a file you made or whose maker you trust")
+    record, experience = _record_beside(args.zip)
+    if record is None:
+        if not args.name:
+            raise ValueError(f"no policy.json beside {args.zip} names it: name the policy with --name")
+        record = PolicyRecord(name=args.name, profile=args.profile or DEFAULT_PROFILE)
+    elif args.profile and args.profile != record.profile:
+        raise ValueError(f"{args.zip} is a policy of profile {record.profile!r} (its policy.json), not "
+                         f"{args.profile!r}")
+    source_folder = args.zip.resolve().parent
+    record.name = check_name(args.name or record.name)
+    store = PolicyStore(args.store)
+    if record.name in store and (store.root / record.name).resolve() != source_folder:
+        raise ValueError(f"policy {record.name!r} exists in {store.root} already: choose another --name")
+    print(f"{args.zip}: loading it runs the code it holds (--trust)", flush=True)
+    model = load_pickled_model(args.zip)
+    if experience is not None:
+        experience = load_experience(experience)
+    stored = store.save(model, record, experience)
+    kept = f" and {stored.experience_file}" if stored.experience_file else ""
+    print(f"{stored.name}: stored in {store.root} as {stored.model_file}{kept} (arrays and JSON)")
+    return 0
+
+
+def _record_beside(zip_path: Path):
+    """(the record of the store policy whose model ``zip_path`` is, its experience file or None), or (None, None)."""
+    from learner_node.policy_store import METADATA_FILE, PolicyStore
+
+    folder = zip_path.resolve().parent
+    if not (folder / METADATA_FILE).is_file():
+        return None, None
+    record = PolicyStore(folder.parent).record(folder.name)
+    if record.model_file != zip_path.name:
+        return None, None
+    return record, (folder / record.experience_file if record.experience_file else None)
+
+
 def _add_rate_arguments(parser: argparse.ArgumentParser, envs: str, steps: int) -> None:
     """The env counts, timed steps and rounds of a bench that times SAC learning (learner, backends)."""
     parser.add_argument("--envs", default=envs, help="comma-separated env counts N")
@@ -772,6 +823,24 @@ def build_parser() -> argparse.ArgumentParser:
     experience.add_argument("--seed", type=int, default=0, help="of the first episode; episode k: seed + k")
     experience.set_defaults(func=cmd_collect_experience)
 
+    policy = commands.add_parser("policy", help="stored policies: import one of the format before")
+    policy_commands = policy.add_subparsers(dest="policy_command", required=True)
+    policy_import = policy_commands.add_parser(
+        "import", help="convert a stable-baselines3 zip (the pickled format before) into a policy store; "
+        "LOADING THE ZIP RUNS THE CODE IT HOLDS")
+    policy_import.add_argument("zip", type=Path, metavar="ZIP", help="the zip, e.g. <store>/<name>/model-1.zip")
+    policy_import.add_argument("--trust", action="store_true",
+                               help="you trust the file: it is unpickled, which runs any code in it (required)")
+    policy_import.add_argument("--store", type=Path, default=None, metavar="DIR",
+                               help="the policy store to write (default: the learner's, $ROS_HOME/glocal_ros/"
+                                    "policies); the zip's own store converts it in place")
+    policy_import.add_argument("--name", default="",
+                               help="the policy's name (default: the one of the policy.json naming the zip)")
+    policy_import.add_argument("--profile", default=None, choices=list(PROFILES),
+                               help="the learner profile of a zip no policy.json names (default: "
+                                    f"{DEFAULT_PROFILE}); a zip of a store keeps its record's")
+    policy_import.set_defaults(func=cmd_policy_import)
+
     launch = commands.add_parser("launch", help="run the whole graph as processes on the ROS_DOMAIN_ID you set, "
                                  "else on a free one; the same command resumes an interrupted run")
     launch.add_argument("--strategy", default="glocal", choices=STRATEGY_NAMES)
@@ -810,6 +879,10 @@ def main(argv: list[str] | None = None) -> int:
         parser.error(f"train-prior: {args.objects_dir} holds no A0/model.urdf (the layout `assets generate` writes)")
     if args.command == "collect-experience" and args.store is None:
         args.store = assets_dir() / "priors"
+    if args.command == "policy" and args.store is None:
+        from learner_node.policy_store import default_policy_dir
+
+        args.store = default_policy_dir()
     try:
         return args.func(args)
     except ValueError as error:  # bad input (unknown task, ...): a message, not a traceback

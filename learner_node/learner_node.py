@@ -43,11 +43,10 @@ from rclpy.callback_groups import MutuallyExclusiveCallbackGroup, ReentrantCallb
 from rclpy.node import Node
 
 from glocal_ros.curriculum.learner import PAPER_EVAL_EPISODES, paper_threshold
-from glocal_ros.paths import ros_home
 from glocal_ros.tasks import validate_tasks
 from learner_node.evaluation import evaluate
 from learner_node.policies import PolicyExists, PolicyRegistry
-from learner_node.policy_store import PolicyStore
+from learner_node.policy_store import PolicyStore, default_policy_dir
 from learner_node.profiles import DEFAULT_PROFILE, PROFILES, learner_profile
 from learner_node.sac_settings import FINE_TUNING_RECIPES
 from learner_node.sim_client import SimClient
@@ -320,11 +319,6 @@ class LearnerNode(Node):
         result = EvaluationResult(policy=policy, learner_steps=self.trainer.total_steps, purpose=purpose, scores=scores)
         result.header.stamp = self.get_clock().now().to_msg()
         self.evaluations_pub.publish(result)
-
-
-def default_policy_dir() -> Path:
-    """``$ROS_HOME/glocal_ros/policies`` (ROS_HOME defaults to ~/.ros)."""
-    return ros_home() / "glocal_ros" / "policies"
 
 
 def _epoch_seconds(iso_time: str) -> int:

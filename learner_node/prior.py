@@ -16,9 +16,11 @@ prior-paper.md``): the time left is not in the observation, so a terminal
 time limit makes the same state worth -1 or -39 by chance. The paper does not
 say how its prior was trained; this is how this project makes one.
 
-Training checkpoints (model and replay buffer) to a work directory, so an
-interrupted ``glocal-ros train-prior`` resumes where it stopped. The env and
-the demonstrator are passed in: this module does not import the simulator.
+Training checkpoints (model and replay buffer, arrays and JSON:
+``learner_node.model_files``, ``learner_node.replay_buffer``) to a work
+directory, so an interrupted ``glocal-ros train-prior`` resumes where it
+stopped. The env and the demonstrator are passed in: this module does not
+import the simulator.
 """
 
 from __future__ import annotations
@@ -31,9 +33,11 @@ from typing import Callable
 import gymnasium as gym
 import numpy as np
 
+from glocal_ros.files import atomic_write
+from learner_node.model_files import load_model, write_model
 from learner_node.profiles import DEFAULT_PROFILE, learner_profile
-from learner_node.replay_buffer import Experience, recent_experience
-from learner_node.sac_settings import load_model, seed_keys
+from learner_node.replay_buffer import Experience, load_replay_buffer, recent_experience, save_replay_buffer
+from learner_node.sac_settings import seed_keys
 
 Demonstrator = Callable[[gym.Env], np.ndarray]
 
@@ -101,7 +105,11 @@ def train_prior(make_env: Callable[[], gym.Env], demonstrator: Demonstrator, wor
 
     profile = learner_profile(config.profile)
     work_dir.mkdir(parents=True, exist_ok=True)
-    checkpoint, buffer_file = work_dir / "checkpoint.zip", work_dir / "replay_buffer.pkl"
+    checkpoint, buffer_file = work_dir / "checkpoint.npz", work_dir / "replay_buffer.npz"
+    if (work_dir / "checkpoint.zip").is_file():
+        raise ValueError(f"{work_dir / 'checkpoint.zip'} is a checkpoint of the pickled format before, which is not "
+                         "loaded: delete it (and replay_buffer.pkl) to train the prior again, or choose another "
+                         "work directory")
     env = make_env()
     if checkpoint.is_file() and buffer_file.is_file():
         model = load_model(checkpoint, env=env)
@@ -110,7 +118,8 @@ def train_prior(make_env: Callable[[], gym.Env], demonstrator: Demonstrator, wor
                 (wanted["batch_size"], wanted["policy_kwargs"]["net_arch"], wanted["gamma"], wanted["buffer_size"]):
             raise ValueError(f"{checkpoint} continues a model of another network or learner profile than "
                              f"this prior's ({profile.name!r}): choose another work directory")
-        model.load_replay_buffer(buffer_file)
+        if not load_replay_buffer(model.replay_buffer, buffer_file):
+            raise ValueError(f"{buffer_file} holds transitions of another shape than the prior's env")
     else:
         model = profile.new_model(env, config.seed, config.network)
         seed_replay_buffer(model, make_env(), demonstrator, config.demo_episodes, config.seed + 10_000)
@@ -118,6 +127,10 @@ def train_prior(make_env: Callable[[], gym.Env], demonstrator: Demonstrator, wor
         model.learning_starts = 0
 
     successes: deque[bool] = deque(maxlen=50)
+
+    def save_checkpoint(model) -> None:
+        atomic_write(checkpoint, lambda stream: write_model(model, stream))
+        atomic_write(buffer_file, lambda stream: save_replay_buffer(model.replay_buffer, stream))
 
     class Progress(BaseCallback):
         def _on_step(self) -> bool:
@@ -129,14 +142,12 @@ def train_prior(make_env: Callable[[], gym.Env], demonstrator: Demonstrator, wor
             if progress is not None:
                 progress(steps, rate)
             if steps % config.checkpoint_every == 0:
-                self.model.save(checkpoint)
-                self.model.save_replay_buffer(buffer_file)
+                save_checkpoint(self.model)
             return not (steps >= config.min_steps and len(successes) == successes.maxlen
                         and rate >= config.stop_success_rate)
 
     remaining = config.max_steps - model.num_timesteps
     if remaining > 0:
         model.learn(remaining, callback=Progress(), reset_num_timesteps=False)
-    model.save(checkpoint)
-    model.save_replay_buffer(buffer_file)
+    save_checkpoint(model)
     return model

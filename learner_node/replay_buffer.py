@@ -7,16 +7,20 @@ checkpoint every few thousand steps needs only what was collected.
 *Experience* is a bounded set of transitions kept beside a stored policy
 (``PolicyStore``), flat (one row per transition, whatever the number of envs
 that collected them) so that a goal on any number of envs can start its
-buffer with them. Both file kinds are plain ``.npz`` arrays, loaded without
-unpickling.
+buffer with them. Both file kinds are plain ``.npz`` arrays, loaded with
+``allow_pickle=False`` (a pickle, an object array or a member that is no
+array is refused); a file that is not what it should be is a ``ValueError``
+naming it.
 """
 
 from __future__ import annotations
 
 from pathlib import Path
-from typing import BinaryIO
+from typing import BinaryIO, Iterable
 
 import numpy as np
+
+from glocal_ros.files import read_npz
 
 _ARRAYS = ("observations", "next_observations", "actions", "rewards", "dones", "timeouts")
 
@@ -31,14 +35,21 @@ def save_replay_buffer(buffer, stream: BinaryIO) -> None:
 
 
 def load_replay_buffer(buffer, path: Path) -> bool:
-    """Fill ``buffer`` from ``path``; False (buffer left empty) when the shapes differ, e.g. another N."""
-    with np.load(path) as saved:
-        filled = len(saved["observations"])
-        if filled > buffer.buffer_size or saved["observations"].shape[1:] != buffer.observations.shape[1:]:
-            return False
+    """Fill ``buffer`` from ``path``; False (buffer left empty) when the shapes differ, e.g. another N.
+    ``ValueError`` naming ``path`` when it is not a whole buffer file."""
+    saved = read_arrays(path, (*_ARRAYS, "pos", "full"))
+    observations = saved["observations"]
+    if observations.ndim < 1 or len(observations) > buffer.buffer_size \
+            or observations.shape[1:] != buffer.observations.shape[1:]:
+        return False
+    try:
+        if saved["pos"].shape != () or saved["full"].shape != () or not 0 <= int(saved["pos"]) < buffer.buffer_size:
+            raise ValueError("pos and full are not a position in the buffer and a flag")
         for name in _ARRAYS:
-            getattr(buffer, name)[:filled] = saved[name]
-        buffer.pos, buffer.full = int(saved["pos"]), bool(saved["full"])
+            getattr(buffer, name)[:len(observations)] = saved[name]
+    except (ValueError, TypeError) as error:  # arrays of other lengths or shapes than the observations'
+        raise ValueError(f"{path}: {error}") from error
+    buffer.pos, buffer.full = int(saved["pos"]), bool(saved["full"])
     return True
 
 
@@ -79,11 +90,22 @@ def save_experience(experience: Experience, stream: BinaryIO) -> None:
 
 
 def load_experience(path: Path) -> Experience:
-    with np.load(path) as saved:
-        experience = {name: saved[name] for name in _ARRAYS}
-    if len({len(values) for values in experience.values()}) != 1:
+    """The transitions in the experience file ``path``; ``ValueError`` naming it when it is not one."""
+    experience = read_arrays(path, _ARRAYS)
+    if any(values.ndim == 0 for values in experience.values()) or \
+            len({len(values) for values in experience.values()}) != 1:
         raise ValueError(f"{path}: the arrays of the experience differ in length")
     return experience
+
+
+def read_arrays(path: Path, names: Iterable[str]) -> dict[str, np.ndarray]:
+    """The arrays ``names`` of the ``.npz`` file ``path`` (``glocal_ros.files.read_npz``); ``ValueError`` naming
+    ``path`` when one is missing."""
+    arrays = read_npz(path)
+    missing = sorted(set(names) - set(arrays))
+    if missing:
+        raise ValueError(f"{path}: arrays {missing} are missing")
+    return {name: arrays[name] for name in names}
 
 
 def _flat(values: np.ndarray) -> np.ndarray:

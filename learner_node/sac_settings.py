@@ -6,8 +6,7 @@ side on this machine kind (new models learning on the grasp env with
 physics, [64, 64] / 64, one thread) it trained 2.4x as many env steps per
 second as stable-baselines3 on torch with 4 envs and 1.6x with one
 (``glocal-ros bench backends``, ``bench/results/backends.md``). Stored
-models are SBX's: a stable-baselines3 (torch) model does not load
-(``load_model`` says which library made it).
+models are SBX's, as arrays and JSON (``learner_node.model_files``).
 
 One compute thread was fastest on 2 cores (the other core steps physics);
 one gradient step per env step (UTD 1) as in the paper; gamma 0.95 suits
@@ -31,9 +30,7 @@ recipes ``glocal-ros bench transfer`` compares.
 
 from __future__ import annotations
 
-import json
 import os
-import zipfile
 from dataclasses import dataclass
 from typing import Any, Literal
 
@@ -65,22 +62,6 @@ def sac_algorithm():
     return SAC
 
 
-def load_model(path, **kwargs):
-    """The SAC model saved at ``path``, loaded as ``sac_algorithm()``'s, on the CPU.
-
-    ``ValueError`` naming the library that made it when that is not the
-    learner's backend: a stable-baselines3 (torch) model is a zip of the same
-    layout that SBX cannot use.
-    """
-    made_by = saved_policy_module(path)
-    if not made_by.startswith("sbx."):
-        raise ValueError(f"{path} holds a SAC model of {made_by.split('.')[0]!r} ({made_by}); this learner "
-                         "runs SBX (sbx-rl): train the policy again with it (a prior: glocal-ros train-prior)")
-    model = sac_algorithm().load(path, device="cpu", **kwargs)
-    share_compiled_code(model)
-    return model
-
-
 #: (train state, its network, the optimiser's settings) -> (apply_fn, tx) of the first model loaded with them.
 _SHARED_STATICS: dict[tuple, tuple] = {}
 
@@ -93,25 +74,57 @@ def share_compiled_code(model) -> None:
     part is its ``apply_fn`` (a bound method of the network's Module) and ``tx`` (optax closures): every
     loaded model has new ones, so every Train goal from a stored policy compiled SBX's action and update
     functions again, about 20 s of a 40-step goal on a loaded 2-core machine. Models whose Modules and
-    optimiser settings are equal compute the same functions with either.
+    optimiser settings are equal compute the same functions with either. The entropy coefficient's Adam has
+    its rate inside the closure (``entropy_learning_rate``), so its rate is part of its settings.
     """
     policy = model.policy
     settings = (repr(policy.optimizer_class), repr(sorted(policy.optimizer_kwargs.items())),
                 float(model.lr_schedule(1)), model.initial_qf_learning_rate)
     for owner, name in ((policy, "actor_state"), (policy, "qf_state"), (model, "ent_coef_state")):
         state = getattr(owner, name)
-        key = (name, repr(state.apply_fn.__self__), settings)
+        own = (entropy_learning_rate(model),) if name == "ent_coef_state" else ()
+        key = (name, repr(state.apply_fn.__self__), settings, own)
         apply_fn, tx = _SHARED_STATICS.setdefault(key, (state.apply_fn, state.tx))
         setattr(owner, name, state.replace(apply_fn=apply_fn, tx=tx))
 
 
-def saved_policy_module(path) -> str:
-    """The module of the policy class an SB3-layout model zip names (``sbx.sac.policies`` for SBX's SAC)."""
-    try:
-        with zipfile.ZipFile(path) as archive:
-            return json.loads(archive.read("data"))["policy_class"]["__module__"]
-    except (OSError, KeyError, ValueError, zipfile.BadZipFile) as error:
-        raise ValueError(f"{path} is not a saved SAC model: {error}") from error
+def entropy_learning_rate(model) -> float:
+    """The learning rate of the Adam that trains ``model``'s entropy coefficient, as float32 computes with it.
+
+    SBX makes that optimiser ``optax.adam(rate)`` with the model's rate when it builds the model, inside a
+    closure, and keeps it when the model's ``learning_rate`` changes later (a goal's
+    ``FineTuning.learning_rate`` moves the actor's and critics' rates, whose Adams take the rate from their
+    state). The rate is read from what the optimiser does: from a state whose moments and bias corrections
+    are 1, a gradient of 1 moves by exactly -rate in float32. The model's own ``learning_rate`` is returned
+    when it is that number in float32 (the usual case). ``ValueError`` unless ``optax.adam`` of the rate steps
+    exactly as the model's optimiser on a probe.
+    """
+    import jax.numpy as jnp
+    import numpy as np
+    import optax
+
+    tx = model.ent_coef_state.tx
+    one = jnp.ones((), jnp.float32)
+    adam, *rest = tx.init(one)
+    warm = (adam._replace(count=jnp.asarray(2**30, jnp.int32), mu=one, nu=one), *rest)
+    rate = -float(tx.update(one, warm)[0])
+    own = float(model.lr_schedule(1))
+    rate = own if np.float32(own) == np.float32(rate) else rate
+    probe, rebuilt = jnp.asarray([0.3, -2.0, 5e-3], jnp.float32), optax.adam(rate)
+    if not np.array_equal(*(_adam_steps(optimiser, probe) for optimiser in (tx, rebuilt))):
+        raise ValueError("the entropy coefficient's optimiser steps otherwise than optax's Adam of one rate")
+    return rate
+
+
+def _adam_steps(optimiser, probe):
+    """Two steps of ``optimiser`` from its start on gradients made of ``probe``, as numpy arrays."""
+    import numpy as np
+
+    state, moves = optimiser.init(probe), []
+    for gradient in (probe, -3.0 * probe):
+        move, state = optimiser.update(gradient, state)
+        moves.append(np.asarray(move))
+    return np.stack(moves)
 
 
 def seed_keys(model, seed: int) -> None:

@@ -13,11 +13,12 @@ order of one step); around it:
   stops when learned checks before its first step too, as "train until
   S > B" does, and stores the initial policy unchanged when it passes;
 - a checkpoint (model, replay buffer, progress, the random generators'
-  states) every ``checkpoint_interval`` steps, so that the same goal sent
-  again after a crash continues from it; at a checkpoint every running
-  episode is cut and new ones start, from a seed derived from the step for a
-  seeded goal, so that a resumed goal goes on exactly as the uninterrupted
-  one (the sim's episodes in flight cannot be saved);
+  states; arrays and JSON, nothing pickled) every ``checkpoint_interval``
+  steps, so that the same goal sent again after a crash continues from it;
+  at a checkpoint every running episode is cut and new ones start, from a
+  seed derived from the step for a seeded goal, so that a resumed goal goes
+  on exactly as the uninterrupted one (the sim's episodes in flight cannot
+  be saved);
 - the trained model is written to the policy store only when the goal ends
   by itself (budget spent, learned or its episodes done), never half-way; the goal's outcome is
   kept, so the same goal sent again (its client restarted and lost the
@@ -48,6 +49,7 @@ Choices:
 from __future__ import annotations
 
 import json
+import re
 import shutil
 import time
 from collections import deque
@@ -65,11 +67,12 @@ from glocal_ros.sim_contract import BatchStepper
 from glocal_ros.tasks import validate_tasks
 from learner_node.evaluation import BatchPolicy, Score, evaluate
 from learner_node.fine_tuning import goal_start_actor, start_fine_tuning
+from learner_node.model_files import load_model, write_model
 from learner_node.policies import RANDOM_POLICY, PolicyRegistry
 from learner_node.policy_store import PolicyRecord, check_name
 from learner_node.replay_buffer import add_experience, load_replay_buffer, recent_experience, save_replay_buffer
 from learner_node.profiles import DEFAULT_PROFILE, PROFILES, LearnerProfile
-from learner_node.sac_settings import SAC_KWARGS, FineTuning, load_model, seed_keys
+from learner_node.sac_settings import SAC_KWARGS, FineTuning, seed_keys
 from learner_node.updates import OverlappedUpdates
 from learner_node.vec_env import BatchVecEnv, TaskCycle
 
@@ -77,6 +80,10 @@ from learner_node.vec_env import BatchVecEnv, TaskCycle
 #: (or 2^64 - 1), and would train until cancelled.
 DEFAULT_MAX_STEP_BUDGET = 100_000_000
 CHECKPOINT_FILE = "checkpoint.json"
+#: The files a checkpoint names, in its own folder; a ``.zip`` model is of the pickled format before, which
+#: ``load_model`` refuses saying so.
+_CHECKPOINT_FILES = {"model": re.compile(r"^model-[1-9][0-9]{0,17}\.(npz|zip)$"),
+                     "buffer": re.compile(r"^buffer-[1-9][0-9]{0,17}\.npz$")}
 #: Keys of a seeded goal's streams (``glocal_ros.seeds.derived_seed``): training, and each evaluation.
 TRAINING_STREAM, EVALUATION_STREAM = 0, 1
 FINISHED_FILE = "finished.json"
@@ -244,10 +251,9 @@ class Trainer:
 
     def _finished_before(self, spec: TrainSpec, folder: Path) -> TrainOutcome | None:
         """The outcome of this very goal when it finished before and its policy is unchanged since."""
-        path = folder / FINISHED_FILE
-        if not path.is_file():
+        finished = _read_json(folder / FINISHED_FILE, ("spec", "state", "model_file"))
+        if finished is None:
             return None
-        finished = json.loads(path.read_text())
         if finished["spec"] != _spec_key(spec) or spec.output_policy not in self.policies.store:
             return None
         if finished.get("learner") != self.learner_key:
@@ -339,9 +345,13 @@ class _Goal:
             model = load_model(self.checkpoint_dir / saved["model"], env=self.vec_env)
             if not load_replay_buffer(model.replay_buffer, self.checkpoint_dir / saved["buffer"]):
                 self.start_buffer(model)
-            self.state.__dict__.update(saved["state"])
-            restore_random_state(model, saved["random_state"])
-            self.cycle.position = saved["task_position"]
+            try:
+                self.state = _GoalState(**saved["state"])
+                restore_random_state(model, saved["random_state"])
+                self.cycle.position = int(saved["task_position"])
+            except (KeyError, TypeError, ValueError) as error:
+                raise ValueError(f"{self.checkpoint_dir / CHECKPOINT_FILE}: not a checkpoint's state "
+                                 f"({type(error).__name__}: {error})") from error
             return model, self.state.steps_used
         model = trainer._warm_model(spec)
         if model is not None:
@@ -529,8 +539,8 @@ class _Goal:
         folder.mkdir(parents=True, exist_ok=True)
         previous = _read_checkpoint(folder)
         version = previous["version"] + 1 if previous else 1
-        model_file, buffer_file = f"model-{version}.zip", f"buffer-{version}.npz"
-        atomic_write(folder / model_file, model.save)
+        model_file, buffer_file = f"model-{version}.npz", f"buffer-{version}.npz"
+        atomic_write(folder / model_file, lambda stream: write_model(model, stream))
         atomic_write(folder / buffer_file, lambda stream: save_replay_buffer(model.replay_buffer, stream))
         text = json.dumps({"version": version, "spec": _spec_key(self.spec), "learner": self.trainer.learner_key,
                            "model": model_file, "buffer": buffer_file, "state": asdict(self.state),
@@ -584,10 +594,28 @@ def restore_random_state(model, saved: dict) -> None:
 
 
 def _read_checkpoint(folder: Path) -> dict | None:
+    """The checkpoint in ``folder`` (None: none); ``ValueError`` naming its file when it is not one, or names a
+    file outside the folder or of another kind."""
     path = folder / CHECKPOINT_FILE
+    saved = _read_json(path, ("version", "spec", "model", "buffer", "state", "random_state", "task_position"))
+    for key, pattern in _CHECKPOINT_FILES.items():
+        if saved is not None and not (isinstance(saved[key], str) and pattern.match(saved[key])):
+            raise ValueError(f"{path}: {key} {saved[key]!r} is not a file of this checkpoint: refusing to load it")
+    return saved
+
+
+def _read_json(path: Path, keys: Sequence[str]) -> dict | None:
+    """The JSON object in ``path`` with at least ``keys`` (None: no file); ``ValueError`` naming ``path`` when it
+    is not one (a pickle planted there is not JSON, and is never unpickled)."""
     if not path.is_file():
         return None
-    return json.loads(path.read_text())
+    try:
+        saved = json.loads(path.read_bytes())
+    except ValueError as error:
+        raise ValueError(f"{path}: not JSON ({error})") from error
+    if not isinstance(saved, dict) or not set(keys) <= set(saved):
+        raise ValueError(f"{path}: not an object with {', '.join(keys)}")
+    return saved
 
 
 def _spec_key(spec: TrainSpec) -> dict:

@@ -116,3 +116,19 @@ def answers(client, request, timeout: float = 5.0) -> bool:
         return call(client, request, timeout) is not None
     except Exception:  # noqa: BLE001 - not answered yet
         return False
+
+
+def store_pickled_policy(root: Path, name: str, model, **fields) -> Path:
+    """A policy of the format before in the store at ``root``: stable-baselines3's zip of ``model`` (pickles) and
+    a policy.json naming it, with ``fields``; returns the zip's path."""
+    import json
+    from dataclasses import asdict
+
+    from learner_node.policy_store import PolicyRecord
+
+    folder = root / name
+    folder.mkdir(parents=True)
+    model.save(folder / "model-1.zip")
+    record = PolicyRecord(name=name, model_file="model-1.zip", **fields)
+    (folder / "policy.json").write_text(json.dumps(asdict(record)))
+    return folder / "model-1.zip"

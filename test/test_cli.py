@@ -1,9 +1,12 @@
-"""`glocal-ros run` and `glocal-ros evaluate` as a user types them."""
+"""`glocal-ros run`, `evaluate`, `collect-experience` and `policy import` as a user types them."""
 
 import json
+import shutil
 import signal
 import subprocess
 import sys
+
+import numpy as np
 
 from conftest import REPO, wait_until
 
@@ -70,3 +73,63 @@ def test_train_prior_refuses_an_objects_dir_without_a0_before_training(tmp_path)
     result = run_cli("train-prior", "--objects-dir", str(tmp_path), "--out", str(tmp_path / "priors"))
     assert result.returncode == 2 and f"{tmp_path} holds no A0/model.urdf" in result.stderr
     assert "Traceback" not in result.stderr and not (tmp_path / "priors").exists()
+
+
+PICKLED_PRIOR = REPO / "test" / "data" / "pickled-priors" / "priors" / "prior"
+
+
+def test_policy_import_refuses_without_trust_and_reads_nothing(tmp_path):
+    zip_file = tmp_path / "model.zip"
+    shutil.copy(PICKLED_PRIOR / "model-1.zip", zip_file)
+    result = run_cli("policy", "import", str(zip_file), "--name", "p", "--store", str(tmp_path / "store"))
+    assert result.returncode == 2 and "Traceback" not in result.stderr
+    assert "unpickles it, which runs any code it holds: pass --trust" in result.stderr
+    assert not (tmp_path / "store").exists()
+
+
+def test_policy_import_converts_a_stores_zip_in_place_keeping_its_record_and_experience(tmp_path):
+    """The shipped prior as it was (test/data/pickled-priors, with its experience): the command writes what the
+    shipped, converted prior holds, and says that it ran the zip's code."""
+    from learner_node.model_files import read_model_file
+    from learner_node.policy_store import PolicyStore
+
+    shipped = PolicyStore(REPO / "assets" / "priors")
+    folder = tmp_path / "store" / "prior"
+    shutil.copytree(PICKLED_PRIOR, folder)
+    record = json.loads((folder / "policy.json").read_text())
+    shutil.copy(shipped.root / "prior" / shipped.record("prior").experience_file, folder / "experience-1.npz")
+    (folder / "policy.json").write_text(json.dumps({**record, "experience_file": "experience-1.npz"}))
+
+    result = run_cli("policy", "import", str(folder / "model-1.zip"), "--trust", "--store", str(tmp_path / "store"))
+    assert result.returncode == 0, result.stderr
+    assert f"{folder / 'model-1.zip'}: loading it runs the code it holds (--trust)" in result.stdout
+    assert sorted(path.name for path in folder.iterdir()) == ["experience-2.npz", "model-2.npz", "policy.json"]
+    converted = PolicyStore(tmp_path / "store").record("prior")
+    for name in ("task", "steps_trained", "last_score", "last_score_task", "profile", "observation_layout", "extra"):
+        assert getattr(converted, name) == record[name], name
+    arrays, metadata = read_model_file(folder / converted.model_file)
+    shipped_arrays, shipped_metadata = read_model_file(shipped.model_path("prior"))
+    assert metadata == shipped_metadata and arrays.keys() == shipped_arrays.keys()
+    for name, values in arrays.items():
+        np.testing.assert_array_equal(values, shipped_arrays[name], err_msg=name)
+        assert values.dtype == shipped_arrays[name].dtype, name
+    for name, values in PolicyStore(tmp_path / "store").experience("prior").items():
+        np.testing.assert_array_equal(values, shipped.experience("prior")[name], err_msg=name)
+
+
+def test_policy_import_of_a_bare_zip_takes_a_name_and_a_profile_and_never_overwrites(tmp_path):
+    from learner_node.policy_store import PolicyStore
+
+    zip_file = tmp_path / "checkpoint.zip"
+    shutil.copy(PICKLED_PRIOR / "model-1.zip", zip_file)
+    store = str(tmp_path / "store")
+    result = run_cli("policy", "import", str(zip_file), "--trust", "--store", store)
+    assert result.returncode == 2 and "no policy.json beside" in result.stderr and "--name" in result.stderr
+    result = run_cli("policy", "import", str(zip_file), "--trust", "--store", store, "--name", "p",
+                     "--profile", "paper")
+    assert result.returncode == 0, result.stderr
+    record = PolicyStore(tmp_path / "store").record("p")
+    assert (record.profile, record.model_file, record.experience_file) == ("paper", "model-1.npz", "")
+    result = run_cli("policy", "import", str(zip_file), "--trust", "--store", store, "--name", "p")
+    assert result.returncode == 2 and "policy 'p' exists in" in result.stderr
+    assert PolicyStore(tmp_path / "store").record("p").model_file == "model-1.npz" and zip_file.is_file()

@@ -1,11 +1,14 @@
-"""The policy store: named SAC policies on disk, written atomically."""
+"""The policy store: named SAC policies on disk, written atomically, loaded as data."""
 
 import json
+import re
 import subprocess
 import sys
 
 import numpy as np
 import pytest
+
+from conftest import store_pickled_policy
 from learner_node.policy_store import PolicyRecord, PolicyStore, UnknownPolicyError
 from learner_node.sac_settings import DEFAULT_NETWORK, network
 from sim_node.grasp_env import GraspEnv
@@ -31,17 +34,30 @@ def test_save_list_load_update(tmp_path, model):
     assert store.update("G1", last_score=80.0, last_score_task="B2").last_score == 80.0
 
 
-def test_a_model_of_another_library_is_refused_on_load_naming_it(tmp_path, model):
+def test_a_model_of_another_library_is_refused_on_save_naming_it_and_nothing_is_written(tmp_path, model):
     from stable_baselines3 import SAC
 
     store = PolicyStore(tmp_path)
-    store.save(SAC("MlpPolicy", model.get_env(), seed=0, device="cpu", buffer_size=100),
-               PolicyRecord(name="torch_made"))
-    with pytest.raises(ValueError, match="holds a SAC model of 'stable_baselines3'.*runs SBX"):
-        store.load("torch_made")
-    (tmp_path / "torch_made" / store.record("torch_made").model_file).write_bytes(b"not a zip")
-    with pytest.raises(ValueError, match="is not a saved SAC model"):
-        store.load("torch_made")
+    with pytest.raises(ValueError, match="only SBX's SAC.*not stable_baselines3.sac.sac.SAC"):
+        store.save(SAC("MlpPolicy", model.get_env(), seed=0, device="cpu", buffer_size=100),
+                   PolicyRecord(name="torch_made"))
+    assert store.names() == [] and list((tmp_path / "torch_made").iterdir()) == []
+
+
+def test_a_policy_of_the_pickled_format_before_is_listed_never_loaded_or_copied(tmp_path, model):
+    """A stable-baselines3 zip (what the store wrote before) is refused naming the file and the command that
+    converts it; the refusal reads none of it."""
+    store_pickled_policy(tmp_path / "store", "old", model)
+    store = PolicyStore(tmp_path / "store")
+    assert store.names() == ["old"] and store.record("old").model_file == "model-1.zip"
+    zip_file = tmp_path / "store" / "old" / "model-1.zip"
+    message = (f"{re.escape(str(zip_file))}: policy 'old' is a stable-baselines3 zip.*glocal-ros policy import "
+               f"{re.escape(str(zip_file))} --trust")
+    for action in (lambda: store.load("old"), lambda: PolicyStore(tmp_path / "copy").add_copy(store, "old", "new"),
+                   lambda: store.keep_experience("old", _experience(2))):
+        with pytest.raises(ValueError, match=message):
+            action()
+    assert not (tmp_path / "copy" / "new").exists() and store.record("old").experience_file == ""
 
 
 def test_overwrite_keeps_one_complete_model(tmp_path, model):
@@ -49,7 +65,7 @@ def test_overwrite_keeps_one_complete_model(tmp_path, model):
     store.save(model, PolicyRecord(name="L1"))
     store.save(model, PolicyRecord(name="L1", steps_trained=5))
     files = sorted(p.name for p in (tmp_path / "L1").iterdir())
-    assert files == ["model-2.zip", "policy.json"]
+    assert files == ["model-2.npz", "policy.json"]
     assert store.record("L1").steps_trained == 5
 
 
@@ -62,13 +78,14 @@ def test_unknown_and_invalid_names(tmp_path):
             store.record(bad)
 
 
-@pytest.mark.parametrize("model_file", ["../other/model-1.zip", "/etc/passwd", "model-1.zip/..", "evil.pkl"])
+@pytest.mark.parametrize("model_file", ["../other/model-1.npz", "/etc/passwd", "model-1.npz/..", "evil.pkl",
+                                        "../other/model-1.zip"])
 def test_a_model_file_outside_the_store_naming_is_refused(tmp_path, model, model_file):
-    """policy.json is data anyone may edit; the model it names is unpickled: it must be the store's own."""
+    """policy.json is data anyone may edit: the model it names must be the store's own."""
     store = PolicyStore(tmp_path)
     store.save(model, PolicyRecord(name="G1"))
     metadata = tmp_path / "G1" / "policy.json"
-    metadata.write_text(metadata.read_text().replace('"model-1.zip"', json.dumps(model_file)))
+    metadata.write_text(metadata.read_text().replace('"model-1.npz"', json.dumps(model_file)))
     with pytest.raises(ValueError, match="is not a model file of this store"):
         store.load("G1")
 
@@ -79,13 +96,14 @@ def test_a_kill_during_save_never_corrupts_the_store(tmp_path, model):
     # A process killed mid-save (SIGKILL right after it started writing the new model).
     script = (
         "import os, signal, sys\n"
+        "from learner_node import policy_store\n"
         "from learner_node.policy_store import PolicyStore, PolicyRecord\n"
         "store = PolicyStore(sys.argv[1])\n"
-        "class Dying:\n"
-        "    def save(self, stream):\n"
-        "        stream.write(b'partial')\n"
-        "        os.kill(os.getpid(), signal.SIGKILL)\n"
-        "store.save(Dying(), PolicyRecord(name='P', steps_trained=2))\n"
+        "def dying(model, stream):\n"
+        "    stream.write(b'partial')\n"
+        "    os.kill(os.getpid(), signal.SIGKILL)\n"
+        "policy_store.write_model = dying\n"
+        "store.save(object(), PolicyRecord(name='P', steps_trained=2))\n"
     )
     result = subprocess.run([sys.executable, "-c", script, str(tmp_path)], capture_output=True)
     assert result.returncode == -9
@@ -110,7 +128,7 @@ def test_a_write_that_fails_for_room_names_the_file_and_leaves_nothing(tmp_path)
     import subprocess
     import sys
 
-    target = tmp_path / "L1" / "model-2.zip"
+    target = tmp_path / "L1" / "model-2.npz"
     target.parent.mkdir()
     result = subprocess.run([sys.executable, "-c", _SAVE_WITHOUT_ROOM, str(target)], capture_output=True, text=True,
                             timeout=120, check=True)
@@ -131,7 +149,7 @@ def _experience(transitions: int, start: float = 0.0) -> dict:
 def test_experience_is_kept_with_its_model_copied_with_it_and_dropped_by_a_save_without_it(tmp_path, model):
     store = PolicyStore(tmp_path / "a")
     store.save(model, PolicyRecord(name="P"), _experience(7))
-    assert sorted(p.name for p in (tmp_path / "a" / "P").iterdir()) == ["experience-1.npz", "model-1.zip",
+    assert sorted(p.name for p in (tmp_path / "a" / "P").iterdir()) == ["experience-1.npz", "model-1.npz",
                                                                         "policy.json"]
     np.testing.assert_array_equal(store.experience("P")["observations"][:, 0], np.arange(7))
 
@@ -139,14 +157,14 @@ def test_experience_is_kept_with_its_model_copied_with_it_and_dropped_by_a_save_
     copy.add_copy(store, "P", "Q")
     np.testing.assert_array_equal(copy.experience("Q")["next_observations"][:, 0], np.arange(7) + 1)
 
-    model_bytes = (tmp_path / "a" / "P" / "model-1.zip").read_bytes()
+    model_bytes = (tmp_path / "a" / "P" / "model-1.npz").read_bytes()
     store.keep_experience("P", _experience(3, start=100))
     assert (tmp_path / "a" / "P" / store.record("P").model_file).read_bytes() == model_bytes
     np.testing.assert_array_equal(store.experience("P")["observations"][:, 0], [100, 101, 102])
 
     store.save(model, PolicyRecord(name="P"))
     assert store.experience("P") is None
-    assert sorted(p.name for p in (tmp_path / "a" / "P").iterdir()) == ["model-3.zip", "policy.json"]
+    assert sorted(p.name for p in (tmp_path / "a" / "P").iterdir()) == ["model-3.npz", "policy.json"]
 
 
 @pytest.mark.parametrize("experience_file", ["../other/experience-1.npz", "/etc/passwd", "evil.pkl"])

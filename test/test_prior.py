@@ -19,7 +19,7 @@ def test_a_prior_has_the_chosen_network_and_resumes_from_its_checkpoint(tmp_path
     hidden = model.policy.actor_state.params["params"]
     assert [hidden[layer]["kernel"].shape[1] for layer in ("Dense_0", "Dense_1")] == [64, 64]
     assert model.num_timesteps == 80
-    assert (tmp_path / "checkpoint.zip").is_file() and (tmp_path / "replay_buffer.pkl").is_file()
+    assert sorted(path.name for path in tmp_path.iterdir()) == ["checkpoint.npz", "replay_buffer.npz"]
 
     longer = dict(TINY, max_steps=120, min_steps=120)
     resumed = train_prior(lambda: GraspEnv("A0"), ScriptedGraspPolicy().act, tmp_path,
