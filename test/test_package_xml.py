@@ -40,6 +40,7 @@ PYTHON_KEYS: dict[str, str | None] = {
     "sbx": None,
     "jax": None,
     "flax": None,
+    "optax": None,
     "rosbags": "python3-rosbags-pip",
     "trimesh": "python3-trimesh-pip",
     "mcap": None,
@@ -48,7 +49,7 @@ PYTHON_KEYS: dict[str, str | None] = {
 }
 #: How package.xml's comment names a dependency without a key (the pip name).
 PIP_NAMES = {"mcap": "mcap", "fast_simplification": "fast-simplification", "threadpoolctl": "threadpoolctl",
-             "sbx": "sbx-rl", "jax": "jax", "flax": "flax"}
+             "sbx": "sbx-rl", "jax": "jax", "flax": "flax", "optax": "optax"}
 OWN = {*ROOMS, "glocal_interfaces"}
 
 
