@@ -101,13 +101,18 @@ def spin_node(make_node: Callable[[], Node], args: Sequence[str] | None = None, 
 
 
 @contextmanager
-def spinning_node(name: str, domain_id: int, num_threads: int = 1) -> Iterator[Node]:
+def spinning_node(name: str, domain_id: int, num_threads: int = 1, namespace: str = "") -> Iterator[Node]:
     """A node on a context of its own, spun in a background thread: for tools that call nodes (the benches,
-    the tests); ``num_threads`` > 1 runs callbacks in parallel, as ``spin_node``'s does."""
+    the tests); ``num_threads`` > 1 runs callbacks in parallel, as ``spin_node``'s does, and the node's
+    relative names resolve in ``namespace`` ("" for none).
+
+    The thread spins with bounded waits, as ``spin_node`` does, never ``executor.spin()``: the same lost
+    wake-up would leave it deaf to the stop.
+    """
     configure_discovery()
     context = rclpy.Context()
     rclpy.init(context=context, domain_id=domain_id)
-    node = rclpy.create_node(name, context=context)
+    node = rclpy.create_node(name, context=context, namespace=namespace)
     executor = (MultiThreadedExecutor(num_threads, context=context) if num_threads > 1
                 else SingleThreadedExecutor(context=context))
     executor.add_node(node)

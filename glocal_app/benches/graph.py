@@ -38,6 +38,7 @@ import numpy as np
 from glocal_app.processes import NodeProcess, isolated_environment
 from glocal_ros.domain import reserve_domain_id
 from glocal_ros.spaces import ACTION_DIM
+from node_common.runner import spinning_node
 
 CALL_TIMEOUT_SEC = 60.0
 NUM_ENVS = 2
@@ -67,27 +68,6 @@ def burners(on: bool) -> Iterator[None]:
         for process in processes:
             process.kill()
             process.wait()
-
-
-@contextmanager
-def multithreaded_node(name: str, domain_id: int, threads: int = 4, namespace: str = ""):
-    """A node spun by a MultiThreadedExecutor in the background, as the curriculum node's is."""
-    import rclpy
-    from rclpy.executors import MultiThreadedExecutor
-
-    context = rclpy.Context()
-    rclpy.init(context=context, domain_id=domain_id)
-    node = rclpy.create_node(name, context=context, namespace=namespace)
-    executor = MultiThreadedExecutor(threads, context=context)
-    executor.add_node(node)
-    spinner = threading.Thread(target=executor.spin, daemon=True)
-    spinner.start()
-    try:
-        yield node
-    finally:
-        executor.shutdown()
-        node.destroy_node()
-        rclpy.try_shutdown(context=context)
 
 
 def timed_calls(call: Callable[[int], None], count: int, threads: int) -> tuple[list[float], int]:
@@ -134,7 +114,7 @@ def run_graph_bench(goals: int, evaluations: int, steps: int,
     rows: list[GraphBenchRow] = []
     rng = np.random.default_rng(0)
     try:
-        with multithreaded_node("bench_graph", domain_id) as node:
+        with spinning_node("bench_graph", domain_id, num_threads=4) as node:
             learner = RosLearner(node, timeout_sec=CALL_TIMEOUT_SEC)
             learner.wait_for_learner()
             evaluate = node.create_client(Evaluate, names.LEARNER_EVALUATE)

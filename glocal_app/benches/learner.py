@@ -53,7 +53,7 @@ from typing import Callable, Sequence
 import numpy as np
 
 from glocal_app.benches.sim import steps_per_second
-from glocal_app.processes import NodeProcess, isolated_environment
+from glocal_app.processes import NodeProcess, isolated_environment, namespace_arguments
 from glocal_ros.domain import reserve_domain_id
 from glocal_ros.sim_contract import BatchStepper
 from node_common.runner import spinning_node
@@ -191,7 +191,7 @@ def run_learner_bench(env_counts: Sequence[int], steps: int, rounds: int, learne
             namespace = f"/bench{num_envs}"
             env = isolated_environment(domain_id, logs)
             processes = [NodeProcess("sim_node", logs, {"num_envs": num_envs, "initial_task": TASK}, env=env,
-                                     extra_args=("-r", f"__ns:={namespace}"))]
+                                     extra_args=namespace_arguments(namespace))]
             client = SimClient(node, namespace=namespace)
             waits: list[tuple[str, Callable[[], bool]]] = [("sim_node's services", client.ready)]
             variants: list[tuple[str, Callable[[str], float]]] = []
@@ -206,7 +206,7 @@ def run_learner_bench(env_counts: Sequence[int], steps: int, rounds: int, learne
                 processes.append(NodeProcess(
                     "learner_node", logs, {"policy_dir": str(work / f"learner-{num_envs}"), "seed": 0,
                                            "checkpoint_interval": 10_000_000, "learner_profile": profile},
-                    env=env, extra_args=("-r", f"__ns:={namespace}")))
+                    env=env, extra_args=namespace_arguments(namespace)))
                 goals = LearnerNodeGoals(node, namespace)
                 waits.append(("learner_node's Train action", goals.ready))
                 variants.append(("learner_node", lambda name: goals.steps_per_second(

@@ -295,14 +295,14 @@ def run_transfer_graph(recipes: Sequence[str], tasks: Sequence[str], seeds: Sequ
     from glocal_interfaces.msg import EvaluationResult
 
     from curriculum_node.ros_learner import RosLearner
-    from glocal_app.benches.graph import multithreaded_node
-    from glocal_app.processes import NodeProcess, isolated_environment
+    from glocal_app.processes import NodeProcess, isolated_environment, namespace_arguments
     from glocal_ros.curriculum.learner import TrainRequest
     from glocal_ros.domain import reserve_domain_id
     from glocal_ros.seeds import derived_seed
     from learner_node.policy_store import PolicyStore
     from learner_node.training import EVALUATION_STREAM
     from node_common import names, qos
+    from node_common.runner import spinning_node
 
     check_goals(recipes, priors, prior_store, tasks, seeds, settings, 1, profiles)
     if settings.stop_at_threshold:
@@ -315,7 +315,7 @@ def run_transfer_graph(recipes: Sequence[str], tasks: Sequence[str], seeds: Sequ
 
     def pair(index: int, profile: str, recipe: str, prior: str) -> Callable[[], list[TransferGoal]]:
         namespace = f"/transfer{index}"
-        remap = ("-r", f"__ns:={namespace}")
+        remap = namespace_arguments(namespace)
         policy_dir = work / f"policies{index}"
         source = next(store for store in prior_stores(prior_store, profile) if prior in store)
         PolicyStore(policy_dir).add_copy(source, prior, prior)
@@ -327,7 +327,8 @@ def run_transfer_graph(recipes: Sequence[str], tasks: Sequence[str], seeds: Sequ
                                   "fine_tuning": "" if recipe == PROFILE_RECIPE else recipe, "seed": 0,
                                   "checkpoint_interval": 10_000_000}, env=env, extra_args=remap)]
         stack.callback(lambda: [process.stop() for process in reversed(processes)])
-        node = stack.enter_context(multithreaded_node(f"bench_transfer{index}", domain_id, namespace=namespace))
+        node = stack.enter_context(spinning_node(f"bench_transfer{index}", domain_id, num_threads=4,
+                                                  namespace=namespace))
         scores: dict[str, list[int]] = {}
         heard = threading.Condition()
 
