@@ -48,6 +48,7 @@ from glocal_interfaces.msg import CurriculumState, EpisodeRecord, TrainingProgre
 from glocal_interfaces.srv import ListPolicies
 from rclpy.signals import SignalHandlerOptions
 
+from glocal_app.arguments import EXIT_FAILED, EXIT_INTERRUPTED, EXIT_STALLED
 from glocal_app.processes import (NodeProcess, check_run_dir, claim_run_dir, isolated_environment,
                                    namespace_arguments, new_bag_path, normalize_namespace, preset_file,
                                    preset_parameters, run_parameters, run_settings, STATE_FILE)
@@ -62,7 +63,6 @@ STATUS_NAMES = {value: name.removeprefix("STATUS_").lower() for name, value in v
 #: Seconds without an episode, a progress report or a curriculum state before a run counts as hung.
 #: Longer than the curriculum's own re-send of an unanswered goal (ros_learner.GOAL_RESPONSE_TIMEOUT_SEC).
 DEFAULT_WATCHDOG_SEC = 60.0
-EXIT_STALLED = 3
 LEARNER_PROBE_SEC = 5.0
 #: What the watchdog calls the curriculum's state: once heard, the run has started.
 CURRICULUM_HEARD = "curriculum state"
@@ -198,7 +198,8 @@ def check_graph(node, watchdog: Watchdog, progress: Progress, started: Sequence[
 def launch(strategy: str, preset: str, seed: int, run_dir: Path, startup_timeout: float = 120.0,
            report: bool = True, watchdog_sec: float = DEFAULT_WATCHDOG_SEC, namespace: str = "",
            use_sim_time: bool = False, step_budget: int | None = None, learner_profile: str | None = None) -> int:
-    """Run (or resume) one run in ``run_dir``; the curriculum's exit code, 130 on Ctrl-C, ``EXIT_STALLED``.
+    """Run (or resume) one run in ``run_dir``; the curriculum's exit code, ``EXIT_INTERRUPTED`` on Ctrl-C or
+    ``EXIT_STALLED``.
 
     ``step_budget`` replaces the preset's training-step budget, ``learner_profile`` its learner
     profile. Bad input (an unknown preset or profile, a
@@ -255,7 +256,7 @@ def launch(strategy: str, preset: str, seed: int, run_dir: Path, startup_timeout
         started.append(process)
         return process
 
-    exit_code = 1
+    exit_code = EXIT_FAILED
     try:
         start("recorder_node")
         start("sim_node")
@@ -282,7 +283,7 @@ def launch(strategy: str, preset: str, seed: int, run_dir: Path, startup_timeout
     except KeyboardInterrupt:
         progress.close()
         print("interrupted: stopping the graph; the same command resumes the run")
-        exit_code = 130
+        exit_code = EXIT_INTERRUPTED
     except GraphStalled as stalled:
         progress.close()
         print(f"the run is stuck: {stalled}\nstopping the graph; the same command resumes the run", flush=True)
@@ -402,7 +403,7 @@ def experiment(strategies: Sequence[str], seeds: Sequence[int], preset: str, out
             continue
         code = launch(strategy, preset, seed, run_dir, report=False, namespace=namespace,
                       use_sim_time=use_sim_time, step_budget=step_budget, learner_profile=learner_profile)
-        if code == 130:
+        if code == EXIT_INTERRUPTED:
             return code
         if code:
             failed.append(run_dir.name)
@@ -412,4 +413,4 @@ def experiment(strategies: Sequence[str], seeds: Sequence[int], preset: str, out
         write_run_report(run_dirs, out / "report")
     if failed:
         print(f"failed runs: {', '.join(failed)} (the same command retries them)")
-    return 1 if failed else 0
+    return EXIT_FAILED if failed else 0

@@ -10,7 +10,8 @@ from glocal_app.benches.backends import BACKENDS, BackendsBenchRow, backends_ben
 from glocal_app.benches.learner import LearnerBenchRow, learner_bench_report, run_learner_bench
 from glocal_app.benches.transfer import (TransferGoal, TransferSettings, read_transfer_goals, run_transfer_bench,
                                         run_transfer_graph, transfer_bench_report)
-from glocal_app.cli import build_parser, cmd_bench_backends, cmd_bench_learner, cmd_bench_transfer
+from glocal_app.bench_cli import cmd_bench_backends, cmd_bench_learner, cmd_bench_transfer
+from glocal_app.cli import build_parser
 from glocal_ros.paths import assets_dir
 from learner_node.policy_store import PolicyStore
 
@@ -488,7 +489,7 @@ def test_bench_cost_refuses_bad_input_before_anything_runs(tmp_path, capsys, arg
 
 
 def test_bench_cost_command_line_defaults():
-    from glocal_app.cli import cmd_bench_cost
+    from glocal_app.bench_cli import cmd_bench_cost
 
     args = build_parser().parse_args(["bench", "cost"])
     assert args.func is cmd_bench_cost

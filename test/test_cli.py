@@ -57,7 +57,7 @@ def test_collect_experience_gives_a_stored_policy_transitions_of_it_acting_on_it
 
 def test_collect_experience_refuses_bad_input_without_a_traceback(tmp_path):
     for args, message in ((("nope", "--store", str(tmp_path)), "no policy 'nope'"),
-                          (("prior", "--out", str(tmp_path), "--transitions", "0"), "at least 1")):
+                          (("prior", "--out", str(tmp_path), "--transitions", "0"), "--transitions: 0 is below 1")):
         result = run_cli("collect-experience", *args)
         assert result.returncode == 2 and message in result.stderr and "Traceback" not in result.stderr
     assert not (tmp_path / "prior").exists()

@@ -66,7 +66,8 @@ def run_sim_bench(env_counts: Sequence[int], batches: int, rounds: int, task: st
             env = isolated_environment(domain_id, logs)
             workers = min(num_envs, os.cpu_count() or 1)
             sims = [NodeProcess("sim_node", logs, {"num_envs": num_envs, "initial_task": task, "viewer_rate_hz": 0.0,
-                                                   "workers": count}, env=env, extra_args=namespace_arguments(f"/w{count}"))
+                                                   "workers": count},
+                                env=env, extra_args=namespace_arguments(f"/w{count}"))
                     for count in (1, workers)]
             clients = [SimClient(node, namespace=f"/w{count}") for count in (1, workers)]
             batch = BatchedEnvs(lambda i: GraspEnv(task), num_envs, task)

@@ -1,0 +1,102 @@
+"""Argument types and options that several ``glocal-ros`` commands share, and the exit codes they return."""
+
+from __future__ import annotations
+
+import argparse
+import sys
+from pathlib import Path
+
+from glocal_ros.curriculum.codes import STRATEGY_NAMES
+from learner_node.profiles import DEFAULT_PROFILE, PROFILES
+
+EXIT_OK = 0
+#: A run, a check or a bench found a failure (a node failed, an object is not learnable, an answer was lost).
+EXIT_FAILED = 1
+#: Bad input: argparse's own code, and every ``ValueError`` a command raises about its arguments.
+EXIT_USAGE = 2
+#: The graph made no progress, or a node ended early: the same command resumes the run.
+EXIT_STALLED = 3
+#: Interrupted (Ctrl-C): what finished is kept, and the same command resumes.
+EXIT_INTERRUPTED = 130
+
+
+def command_line() -> str:
+    """The command as the user typed it: benches write it beside what it produced."""
+    return "glocal-ros " + " ".join(sys.argv[1:])
+
+
+def name_list(text: str) -> list[str]:
+    """An argparse type: comma-separated names (checked by whoever takes them)."""
+    return [name.strip() for name in text.split(",") if name.strip()]
+
+
+def seed_list(text: str) -> list[int]:
+    """An argparse type: comma-separated non-negative integer seeds."""
+    items = [item.strip() for item in text.split(",")]
+    if not all(item.isdigit() for item in items):
+        raise argparse.ArgumentTypeError(f"{text!r}: expected comma-separated non-negative integers, e.g. 0,1,2")
+    return [int(item) for item in items]
+
+
+def count(minimum: int):
+    """An argparse type: an integer of at least ``minimum``."""
+    def parse(text: str) -> int:
+        value = int(text)
+        if value < minimum:
+            raise argparse.ArgumentTypeError(f"{value} is below {minimum}")
+        return value
+    parse.__name__ = "int"  # argparse names the type in its message: "invalid int value"
+    return parse
+
+
+
+def positive_float(text: str) -> float:
+    """An argparse type: a number above 0."""
+    value = float(text)
+    if not value > 0:
+        raise argparse.ArgumentTypeError(f"{text} is not positive")
+    return value
+
+
+positive_float.__name__ = "float"
+
+
+def print_progress(stage: str, done: int, total: int) -> None:
+    if done == total or done % max(1, total // 20) == 0:
+        print(f"{stage}: {done}/{total}", flush=True)
+
+
+def add_experiment_arguments(parser: argparse.ArgumentParser, preset: str) -> None:
+    """What ``experiment`` and ``bench curriculum`` share: which runs, at which preset and budget."""
+    parser.add_argument("--strategies", type=name_list, default=list(STRATEGY_NAMES),
+                        help=f"comma-separated, of {', '.join(STRATEGY_NAMES)} (default: all)")
+    parser.add_argument("--seeds", type=seed_list, default=[0, 1, 2], help="comma-separated (default: 0,1,2)")
+    parser.add_argument("--preset", default=preset, help=f"a parameter file of assets/params (default: {preset})")
+    parser.add_argument("--budget", type=count(1), default=None, metavar="STEPS",
+                        help="training steps of every run, instead of the preset's step_budget")
+
+
+def add_graph_arguments(parser: argparse.ArgumentParser) -> None:
+    """What ``launch`` and ``experiment`` share about the graph: its namespace and clock."""
+    parser.add_argument("--namespace", default="", metavar="NS",
+                        help="run every node under /NS (e.g. robot1), so that several graphs can share a "
+                             "ROS domain; topics are then recorded as /NS/...")
+    parser.add_argument("--use-sim-time", action="store_true",
+                        help="sim_node and recorder_node on the sim's clock (/clock, /NS/clock under a "
+                             "namespace), which advances by the control period per step; the learner's and the "
+                             "curriculum's timeouts stay wall-clock")
+    add_profile_argument(parser, default=None)
+
+
+def add_profile_argument(parser: argparse.ArgumentParser, default: str | None = DEFAULT_PROFILE) -> None:
+    """``--profile``: the learner profile; a default of None leaves it to the preset."""
+    parser.add_argument("--profile", default=default, choices=list(PROFILES),
+                        help="the learner profile: how policies learn and are scored (learner_node/profiles.py)"
+                             + ("; default: the preset's" if default is None else ""))
+
+
+def add_prior_store_argument(command: argparse.ArgumentParser) -> None:
+    command.add_argument("--prior-store", type=Path, default=None, metavar="DIR",
+                         help="a policy store searched for the prior before the profile's shipped one "
+                              "(train-prior --out; for a set of another A0)")
+
