@@ -75,6 +75,18 @@ def graph_typestore(definitions_dir: Path | None = None) -> Typestore:
     return typestore
 
 
+
+def message_definition(msgtype: str, typestore: Typestore) -> str:
+    """``msgtype``'s ros2msg schema text, as a bag's MCAP schema record holds it.
+
+    The type's own fields, then each type it uses after a line of 80 ``=`` and ``MSG: pkg/Name``: the
+    text rosbags' writer embeds for a channel (the recorder's bags) and the text foxglove_bridge sends
+    with a channel, so a live viewer decodes what it gets as it decodes a bag. ``KeyError`` for a type
+    the typestore does not know.
+    """
+    text, _ = typestore.generate_msgdef(msgtype, ros_version=2)
+    return text
+
 # --- topic names under a namespace ---------------------------------------------------------------
 
 def table_topic(name: str, specs: Iterable[TopicSpec] = GRAPH_TOPICS) -> TopicSpec | None:
