@@ -26,7 +26,8 @@ from glocal_ros.topics import CURRICULUM_STATE, TF
 SUBPROTOCOL = "foxglove.sdk.v1"
 MESSAGE_DATA = 0x01  # the protocol's binary opcode of a message from a subscribed channel
 STATUS_ERROR = 2
-WAIT_SEC = 60.0  # generous: the machine is shared
+WAIT_SEC = 60.0
+UNKNOWN_TYPE_TOPIC = "/glocal/feedback_of_unknown_type"  # generous: the machine is shared
 
 
 def free_port() -> int:
@@ -98,6 +99,7 @@ class FoxgloveClient:
 @pytest.fixture(scope="module")
 def graph(tmp_path_factory):
     """(the bridge process, its port, the test's node, the run_id of the curriculum state it latched)."""
+    from glocal_interfaces.action import Train
     from glocal_interfaces.msg import CurriculumState
     from geometry_msgs.msg import TransformStamped
     from tf2_msgs.msg import TFMessage
@@ -119,6 +121,8 @@ def graph(tmp_path_factory):
             tf.publish(TFMessage(transforms=[transform]))
 
         node.create_timer(0.05, send_tf)
+        # A type without a schema here (an action's feedback, as learner/train's hidden topic has): skipped.
+        node.create_publisher(Train.Impl.FeedbackMessage, UNKNOWN_TYPE_TOPIC, 1)
         bridge = start("foxglove_bridge_node", port=port, discovery_period_sec=0.5)
         wait_until(lambda: _accepts(port), WAIT_SEC, "the bridge's port", processes=[bridge])
         yield bridge, port, node, run_id
@@ -144,10 +148,13 @@ def client(graph):
 
 
 def test_a_client_lists_subscribes_and_decodes_what_arrives_against_the_advertised_schema(graph, client):
-    _, _, _, run_id = graph
+    bridge, _, _, run_id = graph
     viewer = client()
     viewer.pump(lambda: {TF.name, CURRICULUM_STATE.name} <= set(viewer.channels), what="the two topics")
     assert viewer.server_info["supportedEncodings"] == ["cdr"]
+    wait_until(lambda: f"not forwarding {UNKNOWN_TYPE_TOPIC}" in bridge.log(), WAIT_SEC,
+               "the bridge to skip the type it has no schema for", processes=[bridge])
+    assert UNKNOWN_TYPE_TOPIC not in viewer.channels
     typestore = graph_typestore()
     for spec in (TF, CURRICULUM_STATE):
         channel = viewer.channels[spec.name]
