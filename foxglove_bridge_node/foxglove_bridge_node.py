@@ -154,7 +154,8 @@ class FoxgloveBridgeNode(Node):
             self._unsubscribe(topic)
         for topic, clients in demand.items():
             subscription = self._forwarding.get(topic)
-            if subscription is None or (subscription[1].transient_local and clients > self._client_counts.get(topic, 0)):
+            newcomer = clients > self._client_counts.get(topic, 0)
+            if subscription is None or (subscription[1].transient_local and newcomer):
                 self._subscribe(topic)
             self._client_counts[topic] = clients
 
