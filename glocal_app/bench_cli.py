@@ -68,6 +68,13 @@ def cmd_bench_backends(args: argparse.Namespace) -> int:
     return write_bench_report(report, args.out)
 
 
+def cmd_bench_foxglove(args: argparse.Namespace) -> int:
+    from glocal_app.benches.foxglove import foxglove_bench_report, run_foxglove_bench
+
+    result = run_foxglove_bench(args.envs, args.steps, args.pairs)
+    return write_bench_report(foxglove_bench_report(result, command_line()), args.out)
+
+
 def cmd_bench_graph(args: argparse.Namespace) -> int:
     from glocal_app.benches.graph import graph_bench_report, run_graph_bench
 
@@ -249,6 +256,16 @@ def add_bench_commands(commands) -> None:
     bench_graph.add_argument("--steps", type=count(1), default=5000, help="sim/step calls per row")
     bench_graph.add_argument("--out", type=Path, default=Path("bench/results/graph.md"))
     bench_graph.set_defaults(func=cmd_bench_graph)
+    bench_foxglove = bench_commands.add_parser(
+        "foxglove", help="training env steps/s of sim_node + learner_node with and without an idle "
+        "foxglove_bridge_node, alternating (ABBA)")
+    bench_foxglove.add_argument("--envs", type=count(1), default=4, help="envs N of the sim (default 4)")
+    bench_foxglove.add_argument("--steps", type=count(100), default=2000,
+                                help="env steps timed per round, after the warm-up (default 2000)")
+    bench_foxglove.add_argument("--pairs", type=count(1), default=4,
+                                help="ABBA pairs: each one round with the idle bridge, one without "
+                                     "(default 4: two ABBA blocks)")
+    bench_foxglove.add_argument("--out", type=Path, default=Path("bench/results/foxglove.md"))
     bench_learner = bench_commands.add_parser("learner", help="SAC env steps/s with updates, in-process vs through "
                                               "sim_node and learner_node")
     _add_rate_arguments(bench_learner, envs="1,2,4", steps=300)

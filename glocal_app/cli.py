@@ -35,6 +35,7 @@ from glocal_app.bag_cli import add_bag_commands
 from glocal_app.bench_cli import add_bench_commands
 from glocal_app.nodes import NODES
 from glocal_app.policy_cli import add_policy_commands
+from glocal_app.processes import FOXGLOVE_HOST, FOXGLOVE_PORT, FoxgloveEndpoint
 from glocal_ros.curriculum.codes import STRATEGY_NAMES
 from glocal_ros.tasks import parse_task_list
 
@@ -80,7 +81,12 @@ def cmd_evaluate(args: argparse.Namespace) -> int:
 def cmd_launch(args: argparse.Namespace) -> int:
     from glocal_app.launch import launch
 
-    graph = dict(namespace=args.namespace, use_sim_time=args.use_sim_time, learner_profile=args.profile)
+    if args.foxglove_host is not None and args.foxglove is None:
+        raise ValueError("--foxglove-host needs --foxglove [PORT]")
+    foxglove = None if args.foxglove is None else FoxgloveEndpoint(
+        args.foxglove, *(() if args.foxglove_host is None else (args.foxglove_host,)))
+    graph = dict(namespace=args.namespace, use_sim_time=args.use_sim_time, learner_profile=args.profile,
+                 foxglove=foxglove)
     if args.watchdog is None:
         return launch(args.strategy, args.preset, args.seed, args.out, **graph)
     return launch(args.strategy, args.preset, args.seed, args.out, watchdog_sec=args.watchdog, **graph)
@@ -120,6 +126,13 @@ def add_graph_commands(commands) -> None:
     launch.add_argument("--watchdog", type=positive_float, default=None, metavar="SEC",
                         help="stop the graph (resumable) when nothing moves for SEC seconds (default: a minute)")
     add_graph_arguments(launch)
+    launch.add_argument("--foxglove", type=int, nargs="?", const=FOXGLOVE_PORT, default=None, metavar="PORT",
+                        help=f"also start foxglove_bridge_node: the graph's topics live over the Foxglove "
+                             f"WebSocket protocol on ws://{FOXGLOVE_HOST}:PORT (default port {FOXGLOVE_PORT}); "
+                             f"open it in Foxglove with the layout assets/foxglove/glocal.json")
+    launch.add_argument("--foxglove-host", default=None, metavar="HOST",
+                        help=f"serve Foxglove on HOST instead of {FOXGLOVE_HOST} (this host only); e.g. 0.0.0.0 "
+                             f"lets every host that reaches the port see the graph, with no authentication")
     launch.set_defaults(func=cmd_launch)
 
     experiment = commands.add_parser("experiment", help="strategies x seeds as separate runs (resumable), "

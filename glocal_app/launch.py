@@ -49,9 +49,10 @@ from glocal_interfaces.srv import ListPolicies
 from rclpy.signals import SignalHandlerOptions
 
 from glocal_app.arguments import EXIT_FAILED, EXIT_INTERRUPTED, EXIT_STALLED
-from glocal_app.processes import (NodeProcess, check_run_dir, claim_run_dir, isolated_environment,
-                                   namespace_arguments, new_bag_path, normalize_namespace, preset_file,
-                                   preset_parameters, run_parameters, run_settings, STATE_FILE)
+from glocal_app.processes import (FOXGLOVE_NODE, FoxgloveEndpoint, NodeProcess, check_foxglove_endpoint, check_run_dir,
+                                   claim_run_dir, isolated_environment, namespace_arguments, new_bag_path,
+                                   normalize_namespace, preset_file, preset_parameters, run_parameters, run_settings,
+                                   STATE_FILE)
 from glocal_ros.curriculum.codes import STRATEGY_NAMES
 from glocal_ros.domain import choose_domain_id
 from glocal_ros.recording import message_counts
@@ -197,20 +198,24 @@ def check_graph(node, watchdog: Watchdog, progress: Progress, started: Sequence[
 
 def launch(strategy: str, preset: str, seed: int, run_dir: Path, startup_timeout: float = 120.0,
            report: bool = True, watchdog_sec: float = DEFAULT_WATCHDOG_SEC, namespace: str = "",
-           use_sim_time: bool = False, step_budget: int | None = None, learner_profile: str | None = None) -> int:
+           use_sim_time: bool = False, step_budget: int | None = None, learner_profile: str | None = None,
+           foxglove: FoxgloveEndpoint | None = None) -> int:
     """Run (or resume) one run in ``run_dir``; the curriculum's exit code, ``EXIT_INTERRUPTED`` on Ctrl-C or
     ``EXIT_STALLED``.
 
     ``step_budget`` replaces the preset's training-step budget, ``learner_profile`` its learner
-    profile. Bad input (an unknown preset or profile, a
-    budget below one evaluation interval, an invalid namespace or ROS_DOMAIN_ID, another run's
-    directory) raises ``ValueError`` before anything starts.
+    profile; ``foxglove`` starts foxglove_bridge_node there, before the other nodes. Bad input (an
+    unknown preset or profile, a budget below one evaluation interval, an invalid namespace or
+    ROS_DOMAIN_ID, another run's directory, a Foxglove port that is taken or invalid) raises
+    ``ValueError`` before anything starts.
     """
     params_file = preset_file(preset)
     check_episode_steps(preset)
     check_step_budget(preset, step_budget)
     check_learner_profile(learner_profile)
     namespace = normalize_namespace(namespace)
+    if foxglove is not None:
+        check_foxglove_endpoint(foxglove)
     domain = choose_domain_id()
     try:
         resumed = claim_run_dir(run_dir, run_settings(strategy, preset, seed, step_budget, learner_profile))
@@ -249,7 +254,7 @@ def launch(strategy: str, preset: str, seed: int, run_dir: Path, startup_timeout
     # Raw: the watchdog only needs to know that an episode came, not what it holds.
     node.create_subscription(EpisodeRecord, names.EPISODES, heard("an episode"), qos.EPISODES, raw=True)
     started: list[NodeProcess] = []
-    plan = run_parameters(strategy, seed, run_dir, bag, use_sim_time, step_budget, learner_profile)
+    plan = run_parameters(strategy, seed, run_dir, bag, use_sim_time, step_budget, learner_profile, foxglove)
 
     def start(name: str) -> NodeProcess:
         process = NodeProcess(name, logs, plan[name], params_file, env, extra_args=namespace_arguments(namespace))
@@ -258,6 +263,9 @@ def launch(strategy: str, preset: str, seed: int, run_dir: Path, startup_timeout
 
     exit_code = EXIT_FAILED
     try:
+        if foxglove is not None:
+            start(FOXGLOVE_NODE)
+            print(f"Foxglove: open a connection to {foxglove.url} (layout: assets/foxglove/glocal.json)", flush=True)
         start("recorder_node")
         start("sim_node")
         start("learner_node")

@@ -6,4 +6,4 @@ runs it, and a wrapper ``bin/NODE`` that setup.py installs into
 (no dependency is installed when it runs), so it imports nothing.
 """
 
-NODES: tuple[str, ...] = ("sim_node", "learner_node", "curriculum_node", "recorder_node")
+NODES: tuple[str, ...] = ("sim_node", "learner_node", "curriculum_node", "recorder_node", "foxglove_bridge_node")

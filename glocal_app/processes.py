@@ -5,7 +5,9 @@ The plan is ROS-free and is the one source of both ways to start a run:
 glocal.launch.py`` (``launch/glocal.launch.py``) give every node the same
 parameters from it: the preset's parameter file, the seed, the run directory's
 ``bag/``, ``policies/`` and ``curriculum/``, the namespace and, for the nodes in
-``SIM_TIME_NODES`` only, ``use_sim_time``.
+``SIM_TIME_NODES`` only, ``use_sim_time``. A run with a Foxglove endpoint
+(``--foxglove [PORT]``, ``foxglove:=true``) also starts foxglove_bridge_node on it
+(``run_nodes``), first, so that a viewer can connect while the others start.
 
 A process is started as ``glocal-ros run NODE``, logged to a file and stopped
 cleanly.
@@ -17,27 +19,81 @@ dependencies (importing ``glocal_ros`` loads gymnasium).
 
 from __future__ import annotations
 
+import errno
 import json
 import os
 import re
 import signal
+import socket
 import subprocess
 import sys
 import time
+from dataclasses import dataclass
 from pathlib import Path
 from typing import Mapping, Sequence
 
 #: The nodes of a run, in the order they start (they stop in the reverse order).
 RUN_NODES = ("recorder_node", "sim_node", "learner_node", "curriculum_node")
+#: The live viewer's bridge, started (first) when the run is given a Foxglove endpoint.
+FOXGLOVE_NODE = "foxglove_bridge_node"
 #: The nodes that follow the sim's /clock when the run asks for sim time: the sim stamps what it
-#: publishes with it, the recorder records on it. The learner's and the curriculum's timeouts (a
-#: service that does not answer, a goal that takes too long) stay wall-clock on purpose.
-SIM_TIME_NODES = ("sim_node", "recorder_node")
+#: publishes with it, the recorder records on it, the Foxglove bridge gives its messages log times on
+#: it. The learner's and the curriculum's timeouts (a service that does not answer, a goal that takes
+#: too long) stay wall-clock on purpose.
+SIM_TIME_NODES = ("sim_node", "recorder_node", FOXGLOVE_NODE)
+#: Foxglove's own default port (foxglove_bridge's and the SDK's; foxglove_bridge_node's default too).
+FOXGLOVE_PORT = 8765
+#: Where the bridge serves unless told otherwise: this host only. Another address is an explicit opt-in,
+#: as reaching other hosts over DDS is (ROS_AUTOMATIC_DISCOVERY_RANGE).
+FOXGLOVE_HOST = "127.0.0.1"
 #: What records which run a run directory holds (``claim_run_dir``).
 RUN_FILE = "run.json"
 #: Where a run directory holds the curriculum's latest state (its journal beside it).
 STATE_FILE = Path("curriculum") / "state.json"
 _NAMESPACE_TOKEN = re.compile(r"[A-Za-z_][A-Za-z0-9_]*")
+
+
+@dataclass(frozen=True)
+class FoxgloveEndpoint:
+    """Where a run's foxglove_bridge_node serves: ``ws://host:port``."""
+
+    port: int = FOXGLOVE_PORT
+    host: str = FOXGLOVE_HOST
+
+    @property
+    def url(self) -> str:
+        return f"ws://{self.host}:{self.port}"
+
+
+def check_foxglove_endpoint(endpoint: FoxgloveEndpoint) -> None:
+    """``ValueError`` unless a server can listen on ``endpoint``: a port of 1..65535, a local address, the port free.
+
+    Checked before any node starts, so that a taken port (another run's bridge, a foxglove_bridge) is
+    said at once, not in the bridge's log once the run is under way. Bound as the bridge's server binds
+    (address reuse on: a port that only lingers in TIME_WAIT is free).
+    """
+    if not 1 <= endpoint.port <= 65535:
+        raise ValueError(f"Foxglove port {endpoint.port}: expected 1..65535")
+    try:
+        infos = socket.getaddrinfo(endpoint.host, endpoint.port, type=socket.SOCK_STREAM)
+    except socket.gaierror as error:
+        raise ValueError(f"Foxglove host {endpoint.host!r}: {error.strerror}") from None
+    family, kind, protocol, _, address = infos[0]
+    with socket.socket(family, kind, protocol) as probe:
+        probe.setsockopt(socket.SOL_SOCKET, socket.SO_REUSEADDR, 1)
+        try:
+            probe.bind(address)
+        except OSError as error:
+            if error.errno == errno.EADDRINUSE:
+                raise ValueError(f"Foxglove port {endpoint.port} on {endpoint.host} is in use: choose another "
+                                 f"with --foxglove PORT (foxglove_port:=PORT)") from None
+            raise ValueError(f"cannot serve Foxglove on {endpoint.host}:{endpoint.port} ({error.strerror}): choose "
+                             f"an address of this host with --foxglove-host (foxglove_host:=)") from None
+
+
+def run_nodes(foxglove: FoxgloveEndpoint | None = None) -> tuple[str, ...]:
+    """The nodes of a run in the order they start: the bridge first when the run has a Foxglove endpoint."""
+    return ((FOXGLOVE_NODE,) if foxglove is not None else ()) + RUN_NODES
 
 
 def preset_file(preset: str, params_dir: Path | None = None) -> Path:
@@ -155,17 +211,20 @@ def preset_parameters(preset: str, node: str, params_dir: Path | None = None) ->
 
 
 def run_parameters(strategy: str, seed: int, run_dir: Path, bag: Path, use_sim_time: bool = False,
-                   step_budget: int | None = None, learner_profile: str | None = None) -> dict[str, dict[str, object]]:
-    """What each node of a run gets on top of its preset, keyed by node, in ``RUN_NODES`` order.
+                   step_budget: int | None = None, learner_profile: str | None = None,
+                   foxglove: FoxgloveEndpoint | None = None) -> dict[str, dict[str, object]]:
+    """What each node of a run gets on top of its preset, keyed by node, in ``run_nodes`` order.
 
     ``use_sim_time`` is given to the nodes of ``SIM_TIME_NODES`` only, and only when on: a node
     without it keeps whatever its preset says. ``step_budget`` (training steps of the whole run)
-    and ``learner_profile`` replace the preset's when given.
+    and ``learner_profile`` replace the preset's when given; ``foxglove`` adds the bridge, serving there.
     """
     budget = {"step_budget": step_budget} if step_budget is not None else {}
     sim_time = {"use_sim_time": True} if use_sim_time else {}
     profile = {"learner_profile": learner_profile} if learner_profile is not None else {}
+    bridge = {FOXGLOVE_NODE: {"port": foxglove.port, "address": foxglove.host, **sim_time}} if foxglove else {}
     return {
+        **bridge,
         "recorder_node": {"output": str(bag), **sim_time},
         "sim_node": {"seed": seed, **sim_time},
         "learner_node": {"seed": seed, "policy_dir": str(run_dir / "policies"), **profile},

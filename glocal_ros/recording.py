@@ -49,7 +49,7 @@ from rosbags.rosbag2.metadata import QosDurability, QosHistory, QosLiveliness, Q
 from rosbags.rosbag2.storage_mcap import Channel, McapWriter, write_channel, write_record, write_string, write_uint16
 from rosbags.rosbag2.storage_mcap import write_uint32, write_uint64
 from rosbags.rosbag2.writer import Qos
-from rosbags.typesys import Stores, get_types_from_msg, get_typestore
+from rosbags.typesys import Stores, TypesysError, get_types_from_msg, get_typestore
 from rosbags.typesys.store import Typestore
 from ruamel.yaml import YAML
 
@@ -74,6 +74,21 @@ def graph_typestore(definitions_dir: Path | None = None) -> Typestore:
     typestore.register(types)
     return typestore
 
+
+
+def message_definition(msgtype: str, typestore: Typestore) -> str:
+    """``msgtype``'s ros2msg schema text, as a bag's MCAP schema record holds it.
+
+    The type's own fields, then each type it uses after a line of 80 ``=`` and ``MSG: pkg/Name``: the
+    text rosbags' writer embeds for a channel (the recorder's bags) and the text foxglove_bridge sends
+    with a channel, so a live viewer decodes what it gets as it decodes a bag. ``KeyError`` for a type
+    the typestore does not know.
+    """
+    try:
+        text, _ = typestore.generate_msgdef(msgtype, ros_version=2)
+    except TypesysError as error:  # rosbags' own error for an unknown type
+        raise KeyError(msgtype) from error
+    return text
 
 # --- topic names under a namespace ---------------------------------------------------------------
 

@@ -1,7 +1,7 @@
 """``ros2 launch glocal_ros glocal.launch.py``: one run of the whole graph, on a full ROS 2 install.
 
     ros2 launch glocal_ros glocal.launch.py strategy:=glocal preset:=smoke seed:=0 \\
-        namespace:=robot1 use_sim_time:=true out:=runs/smoke
+        namespace:=robot1 use_sim_time:=true out:=runs/smoke foxglove:=true
 
 Arguments (``ros2 launch glocal_ros glocal.launch.py --show-args`` lists them):
 ``strategy`` (default glocal), ``preset`` (a parameter file of
@@ -9,8 +9,11 @@ share/glocal_ros/assets/params: smoke, demo, paper; default demo), ``seed``
 (default 0), ``out`` (the run directory; default
 ``$ROS_HOME/glocal_ros/runs/<strategy>-seed<seed>``), ``namespace`` (default
 none; relative, so an including launch file's PushRosNamespace prefixes it)
-``use_sim_time`` (default false) and ``learner_profile`` (default: the
-preset's; glocal_ros or paper, ``learner_node/profiles.py``).
+``use_sim_time`` (default false), ``learner_profile`` (default: the
+preset's; glocal_ros or paper, ``learner_node/profiles.py``) and ``foxglove``
+(default false; true also starts foxglove_bridge_node, first, serving the
+graph's topics on ws://``foxglove_host``:``foxglove_port``, default
+127.0.0.1:8765: another host is an explicit choice).
 
 It starts recorder_node, sim_node, learner_node and curriculum_node with the
 parameters ``glocal-ros launch`` gives them, from the one plan of both
@@ -49,8 +52,10 @@ from launch.event_handlers import OnProcessExit
 from launch.events import Shutdown
 from launch_ros.actions import Node
 
-from glocal_app.processes import (RUN_NODES, claim_run_dir, default_run_dir, namespace_remappings, new_bag_path,
-                                  normalize_namespace, preset_file, run_parameters, run_settings)
+from glocal_app.processes import (FOXGLOVE_HOST, FOXGLOVE_PORT, FoxgloveEndpoint, check_foxglove_endpoint,
+                                  claim_run_dir, default_run_dir, namespace_remappings, new_bag_path,
+                                  normalize_namespace, preset_file, run_nodes as planned_nodes, run_parameters,
+                                  run_settings)
 
 PACKAGE = "glocal_ros"
 #: As glocal_ros.curriculum.codes.STRATEGY_NAMES (not imported: see the docstring; a test compares them).
@@ -70,11 +75,24 @@ def seed_value(text: str) -> int:
     return int(text)
 
 
+def foxglove_endpoint(arguments) -> FoxgloveEndpoint | None:
+    """Where the bridge serves (None: no bridge); ``ValueError`` for a port that is invalid or taken."""
+    if arguments["foxglove"].strip().lower() != "true":
+        return None
+    port = arguments["foxglove_port"].strip()
+    if not port.isdigit():
+        raise ValueError(f"foxglove_port:={port!r}: expected a port number, 1..65535")
+    endpoint = FoxgloveEndpoint(int(port), arguments["foxglove_host"].strip() or FOXGLOVE_HOST)
+    check_foxglove_endpoint(endpoint)
+    return endpoint
+
+
 def run_nodes(context, *args, **kwargs) -> list:
     """The run's nodes, from the arguments' values (an OpaqueFunction: plain values, not substitutions)."""
     arguments = context.launch_configurations
     strategy, preset = arguments["strategy"], arguments["preset"]
     seed = seed_value(arguments["seed"])
+    foxglove = foxglove_endpoint(arguments)
     use_sim_time = arguments["use_sim_time"].strip().lower() == "true"
     namespace = normalize_namespace(arguments["namespace"])
     run_dir = Path(arguments["out"]).expanduser().resolve() if arguments["out"].strip() else \
@@ -85,7 +103,7 @@ def run_nodes(context, *args, **kwargs) -> list:
         raise ValueError(f"learner_profile:={learner_profile!r}: expected one of {', '.join(LEARNER_PROFILES)}")
     claim_run_dir(run_dir, run_settings(strategy, preset, seed, learner_profile=learner_profile))
     plan = run_parameters(strategy, seed, run_dir, new_bag_path(run_dir), use_sim_time,
-                          learner_profile=learner_profile)
+                          learner_profile=learner_profile, foxglove=foxglove)
     nodes = {
         name: Node(
             package=PACKAGE, executable=name, output="screen",
@@ -94,7 +112,7 @@ def run_nodes(context, *args, **kwargs) -> list:
             parameters=[str(params_file), plan[name]],
             remappings=namespace_remappings(namespace),
         )
-        for name in RUN_NODES
+        for name in planned_nodes(foxglove)
     }
     # The run is over when the curriculum node ends: stop the rest, as glocal-ros launch does.
     end_of_run = RegisterEventHandler(OnProcessExit(
@@ -121,5 +139,13 @@ def generate_launch_description() -> LaunchDescription:
                               description="sim_node and recorder_node on the sim's clock (<namespace>/clock)"),
         DeclareLaunchArgument("learner_profile", default_value="", description="the learner profile, "
                               f"one of {', '.join(LEARNER_PROFILES)}; empty: the preset's"),
+        DeclareLaunchArgument("foxglove", default_value="false", choices=list(BOOLEANS),
+                              description="also start foxglove_bridge_node: the graph's topics live in Foxglove "
+                              "over its WebSocket protocol (layout: share/glocal_ros/assets/foxglove/glocal.json)"),
+        DeclareLaunchArgument("foxglove_port", default_value=str(FOXGLOVE_PORT),
+                              description="the bridge's TCP port"),
+        DeclareLaunchArgument("foxglove_host", default_value=FOXGLOVE_HOST, description="the address the bridge "
+                              "serves on: 127.0.0.1 is this host only; e.g. 0.0.0.0 lets other hosts connect "
+                              "(no authentication)"),
         OpaqueFunction(function=run_nodes),
     ])

@@ -40,10 +40,9 @@ and exits with code 1: a recording with a hole is not a recording.
 
 from __future__ import annotations
 
-import importlib
 from dataclasses import dataclass, replace
 from pathlib import Path
-from typing import Callable, Sequence
+from typing import Callable
 
 import rclpy.logging
 from glocal_interfaces.msg import EpisodeRecord
@@ -51,7 +50,7 @@ from rclpy.clock import Clock, ClockType
 from rclpy.duration import Duration
 from rclpy.event_handler import QoSRequestedIncompatibleQoSInfo, SubscriptionEventCallbacks
 from rclpy.node import Node
-from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
+from rclpy.qos import QoSProfile
 from rclpy.serialization import deserialize_message
 from rclpy.subscription import Subscription
 from rosbags.interfaces import Qos, QosDurability, QosHistory, QosLiveliness, QosReliability, QosTime
@@ -59,6 +58,7 @@ from rosbags.interfaces import Qos, QosDurability, QosHistory, QosLiveliness, Qo
 from glocal_ros.recording import BagWriter, RecordingStopped, SequenceTracker, episode_seq_from_cdr
 from glocal_ros.topics import EPISODES, RECORDED_TOPICS, QosSpec, TopicSpec
 from node_common import qos
+from node_common.graph import adapted_qos, message_class
 from node_common.params import declare
 from node_common.runner import spin_node
 
@@ -69,29 +69,9 @@ GRAPH_POLL_SEC = 0.5
 MIN_RELIABLE_DEPTH = 1000
 
 
-def message_class(msgtype: str):
-    """``"pkg/msg/Name"`` -> the generated Python class ``pkg.msg.Name``."""
-    package, kind, name = msgtype.split("/")
-    return getattr(importlib.import_module(f"{package}.{kind}"), name)
-
-
 def subscription_qos(offered: QosSpec) -> QoSProfile:
     """A subscription matching ``offered``, with a queue of ``MIN_RELIABLE_DEPTH`` at least when reliable."""
     return qos.profile(replace(offered, depth=max(offered.depth, MIN_RELIABLE_DEPTH)) if offered.reliable else offered)
-
-
-def adapted_qos(table: QosSpec, offers: Sequence[QoSProfile]) -> QosSpec:
-    """The QoS to subscribe with, given what the topic's publishers offer (the table's while there are none).
-
-    As rosbag2's recorder adapts it: reliable only if every publisher is
-    (a reliable reader matches no best-effort writer), transient local only
-    if every one is (a transient-local reader matches no volatile writer).
-    """
-    if not offers:
-        return table
-    reliable = all(offer.reliability == ReliabilityPolicy.RELIABLE for offer in offers)
-    latched = all(offer.durability == DurabilityPolicy.TRANSIENT_LOCAL for offer in offers)
-    return QosSpec(reliable=reliable, transient_local=latched, depth=table.depth)
 
 
 def _enum(kind, value, unknown):

@@ -133,3 +133,18 @@ def test_policy_import_of_a_bare_zip_takes_a_name_and_a_profile_and_never_overwr
     result = run_cli("policy", "import", str(zip_file), "--trust", "--store", store, "--name", "p")
     assert result.returncode == 2 and "policy 'p' exists in" in result.stderr
     assert PolicyStore(tmp_path / "store").record("p").model_file == "model-1.npz" and zip_file.is_file()
+
+
+def test_launch_refuses_a_bad_or_taken_foxglove_port_before_anything_starts(tmp_path):
+    import socket
+
+    with socket.socket() as taken:
+        taken.bind(("127.0.0.1", 0))
+        taken.listen()
+        port = str(taken.getsockname()[1])
+        for args, error in (((port,), "is in use"), (("0",), "expected 1..65535"),
+                            (("--foxglove-host", "0.0.0.0"), "needs --foxglove")):
+            flags = ("--foxglove", *args) if args[0] != "--foxglove-host" else args
+            result = run_cli("launch", "--preset", "smoke", "--out", str(tmp_path / "run"), *flags)
+            assert result.returncode == 2 and error in result.stderr, result.stderr
+            assert "Traceback" not in result.stderr and not (tmp_path / "run").exists()

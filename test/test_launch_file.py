@@ -15,6 +15,7 @@ from __future__ import annotations
 import ast
 import json
 import runpy
+import socket
 import subprocess
 import sys
 from pathlib import Path
@@ -25,11 +26,12 @@ import yaml
 import launch_standins
 from conftest import REPO
 from glocal_app.nodes import NODES
-from glocal_app.processes import RUN_NODES, run_parameters
+from glocal_app.processes import FOXGLOVE_NODE, RUN_NODES, FoxgloveEndpoint, run_parameters
 from glocal_ros.curriculum.codes import STRATEGY_NAMES
 
 LAUNCH_FILE = REPO / "launch" / "glocal.launch.py"
-ARGUMENTS = {"strategy", "preset", "seed", "out", "namespace", "use_sim_time", "learner_profile"}
+ARGUMENTS = {"strategy", "preset", "seed", "out", "namespace", "use_sim_time", "learner_profile", "foxglove",
+             "foxglove_port", "foxglove_host"}
 #: What the launch file may import: ROS's launch API, the ament index and the stdlib-only plan.
 ALLOWED_IMPORTS = {"__future__", "pathlib", "launch", "launch.actions", "launch.event_handlers", "launch.events",
                    "launch_ros.actions", "ament_index_python.packages", "glocal_app.processes"}
@@ -48,7 +50,8 @@ def evaluate(launch_file, **arguments: str) -> tuple[dict[str, launch_standins.N
     """The Node actions by executable, and the other actions, for ``ros2 launch ... name:=value``."""
     actions = launch_standins.evaluate(launch_file["generate_launch_description"](), **arguments)
     nodes = {a.executable: a for a in actions if isinstance(a, launch_standins.Node)}
-    assert list(nodes) == list(RUN_NODES), "recorder first, then sim, learner, curriculum"
+    bridge = [FOXGLOVE_NODE] if arguments.get("foxglove") == "true" else []
+    assert list(nodes) == bridge + list(RUN_NODES), "(the bridge,) recorder, then sim, learner, curriculum"
     return nodes, [a for a in actions if not isinstance(a, launch_standins.Node)]
 
 
@@ -201,3 +204,33 @@ def test_the_presets_offered_are_the_installed_ones(launch_file):
     assert preset.choices == sorted(p.stem for p in (SHARE / "assets" / "params").glob("*.yaml"))
     assert preset.choices == sorted(p.stem for p in (REPO / "assets" / "params").glob("*.yaml"))
     assert {"smoke", "demo", "paper"} <= set(preset.choices)
+
+
+def test_foxglove_starts_the_bridge_first_with_the_plans_endpoint(launch_file, tmp_path):
+    out = tmp_path / "run"
+    with socket.socket() as free:  # a port nothing listens on
+        free.bind(("127.0.0.1", 0))
+        port = free.getsockname()[1]
+    nodes, _ = evaluate(launch_file, preset="smoke", out=str(out), foxglove="true", foxglove_port=str(port),
+                        namespace="robot1", use_sim_time="true")
+    bridge = nodes[FOXGLOVE_NODE]
+    assert bridge.namespace == "robot1" and bridge.remappings == [("/clock", "clock")]
+    plan = {name: parameters(node)[1] for name, node in nodes.items()}
+    assert plan[FOXGLOVE_NODE] == {"port": port, "address": "127.0.0.1", "use_sim_time": True}
+    assert plan == run_parameters("glocal", 0, out, out / "bag", use_sim_time=True,
+                                  foxglove=FoxgloveEndpoint(port))
+    assert {name for name, node in nodes.items() if "use_sim_time" in parameters(node)[1]} == \
+        {"sim_node", "recorder_node", FOXGLOVE_NODE}
+
+
+@pytest.mark.parametrize("port, error", [("abc", "expected a port number"), ("0", "expected 1..65535"),
+                                         ("taken", "is in use")])
+def test_a_bad_or_taken_foxglove_port_is_refused_before_anything_starts(launch_file, tmp_path, port, error):
+    with socket.socket() as taken:
+        taken.bind(("127.0.0.1", 0))
+        taken.listen()
+        if port == "taken":
+            port = str(taken.getsockname()[1])
+        with pytest.raises(ValueError, match=error):
+            evaluate(launch_file, out=str(tmp_path / "run"), foxglove="true", foxglove_port=port)
+    assert not (tmp_path / "run").exists()

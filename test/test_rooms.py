@@ -17,7 +17,7 @@ from conftest import REPO
 
 LIBRARY = "glocal_ros"
 COMMON = "node_common"
-NODE_PACKAGES = ("sim_node", "learner_node", "curriculum_node", "recorder_node")
+NODE_PACKAGES = ("sim_node", "learner_node", "curriculum_node", "recorder_node", "foxglove_bridge_node")
 APPLICATION = "glocal_app"
 ROOMS = (LIBRARY, COMMON, *NODE_PACKAGES, APPLICATION)
 

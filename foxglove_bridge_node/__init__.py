@@ -1,0 +1,1 @@
+"""foxglove_bridge_node: the graph's topics live in Foxglove over its WebSocket protocol (foxglove-sdk)."""
