@@ -266,6 +266,7 @@ def add_bench_commands(commands) -> None:
                                 help="ABBA pairs: each one round with the idle bridge, one without "
                                      "(default 4: two ABBA blocks)")
     bench_foxglove.add_argument("--out", type=Path, default=Path("bench/results/foxglove.md"))
+    bench_foxglove.set_defaults(func=cmd_bench_foxglove)
     bench_learner = bench_commands.add_parser("learner", help="SAC env steps/s with updates, in-process vs through "
                                               "sim_node and learner_node")
     _add_rate_arguments(bench_learner, envs="1,2,4", steps=300)
