@@ -46,10 +46,11 @@ PYTHON_KEYS: dict[str, str | None] = {
     "mcap": None,
     "fast_simplification": None,
     "threadpoolctl": None,  # scikit-learn's own dependency
+    "ray": None,  # glocal-ros experiment --ray
 }
 #: How package.xml's comment names a dependency without a key (the pip name).
 PIP_NAMES = {"mcap": "mcap", "fast_simplification": "fast-simplification", "threadpoolctl": "threadpoolctl",
-             "sbx": "sbx-rl", "jax": "jax", "flax": "flax", "optax": "optax"}
+             "sbx": "sbx-rl", "jax": "jax", "flax": "flax", "optax": "optax", "ray": "ray"}
 OWN = {*ROOMS, "glocal_interfaces"}
 
 
