@@ -17,6 +17,7 @@ from glocal_app.benches import cost as cost_bench
 from glocal_app.benches.curriculum import BENCH_PRESET, DEFAULT_OUT, DEFAULT_RESULTS
 from glocal_app.benches.transfer import INITIAL_POLICY, PROFILE_RECIPE, TRANSFER_TASKS, TransferSettings
 from glocal_app.nodes import NODES
+from glocal_app.ray_runs import DEFAULT_CPUS_PER_RUN
 from glocal_ros.curriculum.codes import STRATEGY_NAMES
 from glocal_ros.curriculum.learner import paper_threshold, passes_threshold
 from glocal_ros.paths import assets_dir, object_urdf, objects_dir
@@ -80,7 +81,8 @@ def cmd_experiment(args: argparse.Namespace) -> int:
     from glocal_app.launch import experiment
 
     return experiment(args.strategies, args.seeds, args.preset, args.out, namespace=args.namespace,
-                      use_sim_time=args.use_sim_time, step_budget=args.budget, learner_profile=args.profile)
+                      use_sim_time=args.use_sim_time, step_budget=args.budget, learner_profile=args.profile,
+                      ray_address=args.ray, ray_cpus_per_run=args.ray_cpus_per_run)
 
 
 def _name_list(text: str) -> list[str]:
@@ -104,6 +106,12 @@ def add_experiment_arguments(parser: argparse.ArgumentParser, preset: str) -> No
     parser.add_argument("--preset", default=preset, help=f"a parameter file of assets/params (default: {preset})")
     parser.add_argument("--budget", type=_count(1), default=None, metavar="STEPS",
                         help="training steps of every run, instead of the preset's step_budget")
+    parser.add_argument("--ray", default=None, metavar="ADDRESS",
+                        help="run the runs as tasks of the Ray cluster at ADDRESS (HOST:PORT of its head, e.g. "
+                             "10.0.0.5:6379), or of a Ray instance started on this machine (local); the run "
+                             "directories come back to --out (default: one after another, here)")
+    parser.add_argument("--ray-cpus-per-run", type=_count(1), default=DEFAULT_CPUS_PER_RUN, metavar="N",
+                        help=f"CPUs each run reserves on its Ray node (default: {DEFAULT_CPUS_PER_RUN})")
 
 
 def add_graph_arguments(parser: argparse.ArgumentParser) -> None:
@@ -433,11 +441,14 @@ def cmd_bench_curriculum(args: argparse.Namespace) -> int:
         bench_inputs(args.out, args.merge)  # a --merge that holds no run is refused before the first run
         from glocal_app.launch import experiment
 
-        keep_finished_runs(args.out, keep)  # runs that finished before this command
-        for run_dir in restore_kept_runs(keep, args.out):
-            print(f"{run_dir.name}: restored from {keep}")
+        def keep_and_restore() -> None:  # once the Ray cluster, if any, is checked too
+            keep_finished_runs(args.out, keep)  # runs that finished before this command
+            for run_dir in restore_kept_runs(keep, args.out):
+                print(f"{run_dir.name}: restored from {keep}")
+
         code = experiment(args.strategies, args.seeds, args.preset, args.out, step_budget=args.budget, report=False,
-                          learner_profile=args.profile, finished=lambda run_dir: keep_run(run_dir, keep))
+                          learner_profile=args.profile, finished=lambda run_dir: keep_run(run_dir, keep),
+                          ray_address=args.ray, ray_cpus_per_run=args.ray_cpus_per_run, prepare=keep_and_restore)
         if code == 130:  # interrupted: the same command resumes
             return code
     report = tabulate_curriculum_bench(bench_inputs(args.out, args.merge, keep), command, args.results)
