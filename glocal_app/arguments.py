@@ -6,6 +6,7 @@ import argparse
 import sys
 from pathlib import Path
 
+from glocal_app.ray_runs import DEFAULT_CPUS_PER_RUN
 from glocal_ros.curriculum.codes import STRATEGY_NAMES
 from learner_node.profiles import DEFAULT_PROFILE, PROFILES
 
@@ -74,6 +75,12 @@ def add_experiment_arguments(parser: argparse.ArgumentParser, preset: str) -> No
     parser.add_argument("--preset", default=preset, help=f"a parameter file of assets/params (default: {preset})")
     parser.add_argument("--budget", type=count(1), default=None, metavar="STEPS",
                         help="training steps of every run, instead of the preset's step_budget")
+    parser.add_argument("--ray", default=None, metavar="ADDRESS",
+                        help="run the runs as tasks of the Ray cluster at ADDRESS (HOST:PORT of its head, e.g. "
+                             "10.0.0.5:6379), or of a Ray instance started on this machine (local); the run "
+                             "directories come back to --out (default: one after another, here)")
+    parser.add_argument("--ray-cpus-per-run", type=count(1), default=DEFAULT_CPUS_PER_RUN, metavar="N",
+                        help=f"CPUs each run reserves on its Ray node (default: {DEFAULT_CPUS_PER_RUN})")
 
 
 def add_graph_arguments(parser: argparse.ArgumentParser) -> None:

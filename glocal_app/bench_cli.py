@@ -194,11 +194,14 @@ def cmd_bench_curriculum(args: argparse.Namespace) -> int:
         bench_inputs(args.out, args.merge)  # a --merge that holds no run is refused before the first run
         from glocal_app.launch import experiment
 
-        keep_finished_runs(args.out, keep)  # runs that finished before this command
-        for run_dir in restore_kept_runs(keep, args.out):
-            print(f"{run_dir.name}: restored from {keep}")
+        def keep_and_restore() -> None:  # once the Ray cluster, if any, is checked too
+            keep_finished_runs(args.out, keep)  # runs that finished before this command
+            for run_dir in restore_kept_runs(keep, args.out):
+                print(f"{run_dir.name}: restored from {keep}")
+
         code = experiment(args.strategies, args.seeds, args.preset, args.out, step_budget=args.budget, report=False,
-                          learner_profile=args.profile, finished=lambda run_dir: keep_run(run_dir, keep))
+                          learner_profile=args.profile, finished=lambda run_dir: keep_run(run_dir, keep),
+                          ray_address=args.ray, ray_cpus_per_run=args.ray_cpus_per_run, prepare=keep_and_restore)
         if code == EXIT_INTERRUPTED:  # the same command resumes
             return code
     report = tabulate_curriculum_bench(bench_inputs(args.out, args.merge, keep), command, args.results)

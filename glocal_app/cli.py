@@ -96,7 +96,8 @@ def cmd_experiment(args: argparse.Namespace) -> int:
     from glocal_app.launch import experiment
 
     return experiment(args.strategies, args.seeds, args.preset, args.out, namespace=args.namespace,
-                      use_sim_time=args.use_sim_time, step_budget=args.budget, learner_profile=args.profile)
+                      use_sim_time=args.use_sim_time, step_budget=args.budget, learner_profile=args.profile,
+                      ray_address=args.ray, ray_cpus_per_run=args.ray_cpus_per_run)
 
 
 def add_graph_commands(commands) -> None:

@@ -32,7 +32,9 @@ the learner still answers, stops the graph as Ctrl-C does, and exits with
 
 ``experiment`` runs strategies x seeds as separate launches into
 ``OUT/<strategy>-seed<N>/``, skips runs already finished, resumes the others,
-then writes one report over all of them.
+then writes one report over all of them. The launches run here one after
+another, or, with a Ray address, as Ray tasks on a cluster
+(``glocal_app.ray_runs``); either way each is ``RunOptions.launch_run``.
 """
 
 from __future__ import annotations
@@ -40,8 +42,9 @@ from __future__ import annotations
 import json
 import signal
 import time
+from dataclasses import dataclass
 from pathlib import Path
-from typing import Callable, Sequence
+from typing import Callable, Iterator, Sequence
 
 import rclpy
 from glocal_interfaces.msg import CurriculumState, EpisodeRecord, TrainingProgress
@@ -364,7 +367,11 @@ def check_learner_profile(name: str | None) -> None:
         learner_profile(name)
 
 
-def experiment_runs(strategies: Sequence[str], seeds: Sequence[int], out: Path) -> list[tuple[str, int, Path]]:
+#: A run of an experiment: its strategy, seed and run directory (``experiment_runs``).
+PlannedRun = tuple[str, int, Path]
+
+
+def experiment_runs(strategies: Sequence[str], seeds: Sequence[int], out: Path) -> list[PlannedRun]:
     """``(strategy, seed, OUT/<strategy>-seed<N>)`` of every run of an experiment, in the order they run."""
     return [(strategy, seed, out / f"{strategy}-seed{seed}") for strategy in strategies for seed in seeds]
 
@@ -393,32 +400,84 @@ def check_experiment(strategies: Sequence[str], seeds: Sequence[int], preset: st
         check_run_dir(run_dir, run_settings(strategy, preset, seed, step_budget, learner_profile))
 
 
+@dataclass(frozen=True)
+class RunOptions:
+    """What every run of an experiment shares: ``launch``'s arguments beside strategy, seed and run directory.
+
+    ``launch_run`` is the one way an experiment starts a run, here or in a Ray task
+    (``glocal_app.ray_runs``), so that both start the same graph with the same parameters.
+    """
+
+    preset: str
+    namespace: str = ""
+    use_sim_time: bool = False
+    step_budget: int | None = None
+    learner_profile: str | None = None
+
+    def launch_run(self, strategy: str, seed: int, run_dir: Path) -> int:
+        """``launch`` one run (or resume it) into ``run_dir``, without its own report; its exit code."""
+        return launch(strategy, self.preset, seed, run_dir, report=False, namespace=self.namespace,
+                      use_sim_time=self.use_sim_time, step_budget=self.step_budget,
+                      learner_profile=self.learner_profile)
+
+
+def launch_here(runs: Sequence[PlannedRun], options: RunOptions) -> Iterator[tuple[Path, int]]:
+    """Each run launched on this machine, one after another: its run directory and exit code, as it ends."""
+    for strategy, seed, run_dir in runs:
+        yield run_dir, options.launch_run(strategy, seed, run_dir)
+
+
 def experiment(strategies: Sequence[str], seeds: Sequence[int], preset: str, out: Path, namespace: str = "",
                use_sim_time: bool = False, step_budget: int | None = None, report: bool = True,
-               learner_profile: str | None = None, finished: Callable[[Path], object] | None = None) -> int:
+               learner_profile: str | None = None, finished: Callable[[Path], object] | None = None,
+               ray_address: str | None = None, ray_cpus_per_run: int | None = None,
+               prepare: Callable[[], object] | None = None) -> int:
     """Every strategy x seed as its own run under ``out``; finished runs are kept, others (re)launched.
 
-    The runs go one after another, each with ``launch``'s namespace, sim time and domain choice,
-    after ``check_experiment`` passed; then one report over all of them (unless ``report`` is off).
-    ``finished(run_dir)`` is called as each launched run finishes.
+    The runs go one after another here, each with ``launch``'s namespace, sim time and domain
+    choice, after ``check_experiment`` passed; then one report over all of them (unless ``report`` is off).
+    ``finished(run_dir)`` is called as each launched run finishes; ``prepare()`` once everything
+    was checked, before runs are told finished or not (what must not happen for refused input).
+
+    With ``ray_address`` (``HOST:PORT`` of a Ray cluster, or ``local``) the runs that are not
+    finished are Ray tasks of ``ray_cpus_per_run`` CPUs each instead (``glocal_app.ray_runs``), and
+    come back into ``out`` as they end; the cluster is checked (reachable, a node large enough for
+    one run) before any run starts.
     """
     check_experiment(strategies, seeds, preset, out, step_budget, namespace, learner_profile)
-    run_dirs, failed = [], []
-    for strategy, seed, run_dir in experiment_runs(strategies, seeds, out):
-        run_dirs.append(run_dir)
-        if run_finished(run_dir):
-            print(f"{run_dir.name}: finished before")
-            continue
-        code = launch(strategy, preset, seed, run_dir, report=False, namespace=namespace,
-                      use_sim_time=use_sim_time, step_budget=step_budget, learner_profile=learner_profile)
-        if code == EXIT_INTERRUPTED:
-            return code
-        if code:
-            failed.append(run_dir.name)
-        elif finished is not None and run_finished(run_dir):
-            finished(run_dir)
+    options = RunOptions(preset, namespace, use_sim_time, step_budget, learner_profile)
+    runs = experiment_runs(strategies, seeds, out)
+    cluster = None
+    if ray_address is not None:
+        from glocal_app.ray_runs import RayCluster
+
+        cluster = RayCluster.connect(ray_address, ray_cpus_per_run)
+    failed = []
+    try:
+        if prepare is not None:
+            prepare()
+        pending = []
+        for run in runs:
+            if run_finished(run[2]):
+                print(f"{run[2].name}: finished before")
+            else:
+                pending.append(run)
+        outcomes = launch_here(pending, options) if cluster is None else cluster.run(pending, options)
+        for run_dir, code in outcomes:
+            if code == EXIT_INTERRUPTED:
+                return code
+            if code:
+                failed.append(run_dir.name)
+            elif finished is not None and run_finished(run_dir):
+                finished(run_dir)
+    except KeyboardInterrupt:  # on Ray: the runs in progress were cancelled (``RayCluster.run``)
+        print("interrupted; the same command resumes the experiment")
+        return EXIT_INTERRUPTED
+    finally:
+        if cluster is not None:
+            cluster.close()
     if report:
-        write_run_report(run_dirs, out / "report")
+        write_run_report([run_dir for _, _, run_dir in runs], out / "report")
     if failed:
         print(f"failed runs: {', '.join(failed)} (the same command retries them)")
     return EXIT_FAILED if failed else 0

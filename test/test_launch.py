@@ -236,4 +236,8 @@ def test_namespace_sim_time_and_profile_reach_launch_and_experiment(monkeypatch,
                  "--use-sim-time", "--profile", "paper"]) == 0
     assert main(["experiment", "--strategies", "random", "--seeds", "0", "--out", str(tmp_path)]) == 0
     assert calls[0][1] == {"namespace": "robot1", "use_sim_time": True, "learner_profile": "paper"}
-    assert calls[1][1] == {"namespace": "", "use_sim_time": False, "step_budget": None, "learner_profile": None}
+    assert calls[1][1] == {"namespace": "", "use_sim_time": False, "step_budget": None, "learner_profile": None,
+                           "ray_address": None, "ray_cpus_per_run": 2}
+    assert main(["experiment", "--strategies", "random", "--seeds", "0", "--out", str(tmp_path), "--ray",
+                 "10.0.0.5:6379", "--ray-cpus-per-run", "3"]) == 0
+    assert (calls[2][1]["ray_address"], calls[2][1]["ray_cpus_per_run"]) == ("10.0.0.5:6379", 3)

@@ -47,11 +47,12 @@ PYTHON_KEYS: dict[str, str | None] = {
     "fast_simplification": None,
     "threadpoolctl": None,  # scikit-learn's own dependency
     "foxglove": None,  # foxglove-sdk
+    "ray": None,  # glocal-ros experiment --ray
 }
 #: How package.xml's comment names a dependency without a key (the pip name).
 PIP_NAMES = {"mcap": "mcap", "fast_simplification": "fast-simplification", "threadpoolctl": "threadpoolctl",
              "sbx": "sbx-rl", "jax": "jax", "flax": "flax", "optax": "optax",
-             "foxglove": "foxglove-sdk"}
+             "foxglove": "foxglove-sdk", "ray": "ray"}
 OWN = {*ROOMS, "glocal_interfaces"}
 
 
