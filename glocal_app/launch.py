@@ -232,30 +232,10 @@ def launch(strategy: str, preset: str, seed: int, run_dir: Path, startup_timeout
     print(f"{'resuming' if resumed else 'launching'} preset {preset}, strategy {strategy}, seed {seed}{where} "
           f"on {domain.describe()}; logs in {logs}", flush=True)
 
-    configure_discovery()  # the launcher's own participant on loopback too
-    # SIGINT is the launcher's to handle (KeyboardInterrupt below: stop the graph in order). rclpy's
-    # handler would shut the context down first, and a spin_once in progress then raises
-    # ExternalShutdownException instead (seen under load); SIGTERM stops the graph as Ctrl-C does.
-    # Set, not inherited: a launcher started as a script's background job inherits SIGINT ignored
-    # (POSIX shells do that to async commands), and Python then leaves it so: Ctrl-C did nothing.
-    rclpy.init(domain_id=domain.domain_id, signal_handler_options=SignalHandlerOptions.NO)
-    signal.signal(signal.SIGINT, signal.default_int_handler)
-    signal.signal(signal.SIGTERM, signal.default_int_handler)
-    # In the graph's namespace: the names below are relative (node_common.names), so the progress,
-    # the watchdog and the learner probe hear this graph's nodes and no other's.
-    node = rclpy.create_node("glocal_ros_launch", namespace=namespace or None)
+    node = launcher_node(domain.domain_id, namespace)
     progress = Progress()
     watchdog = Watchdog(watchdog_sec, startup_timeout)
-
-    def heard(what: str, handle=lambda message: None):
-        return lambda message: (watchdog.heard(what), handle(message))
-
-    node.create_subscription(CurriculumState, names.CURRICULUM_STATE, heard(CURRICULUM_HEARD, progress.on_state),
-                             qos.LATCHED)
-    node.create_subscription(TrainingProgress, names.TRAINING_PROGRESS, heard("training progress",
-                                                                              progress.on_progress), qos.EVENTS)
-    # Raw: the watchdog only needs to know that an episode came, not what it holds.
-    node.create_subscription(EpisodeRecord, names.EPISODES, heard("an episode"), qos.EPISODES, raw=True)
+    listen_for_progress(node, progress, watchdog)
     started: list[NodeProcess] = []
     plan = run_parameters(strategy, seed, run_dir, bag, use_sim_time, step_budget, learner_profile, foxglove)
 
@@ -272,25 +252,10 @@ def launch(strategy: str, preset: str, seed: int, run_dir: Path, startup_timeout
         start("recorder_node")
         start("sim_node")
         start("learner_node")
-        deadline = time.monotonic() + startup_timeout
-        # Before the curriculum starts: the recorder listens to the sim's episode stream, so that
-        # the bag holds every episode from seq 0.
-        while node.count_subscribers(names.EPISODES) < 1 or node.count_publishers(names.EPISODES) < 1:
-            rclpy.spin_once(node, timeout_sec=0.1)
-            failed = [p for p in started if not p.running]
-            if failed or time.monotonic() > deadline:
-                raise RuntimeError(f"{(failed or started)[0].node} did not start: see {(failed or started)[0].log_path}")
+        wait_for_recorder(node, started, startup_timeout)
         curriculum = start("curriculum_node")
         watchdog.started = time.monotonic()
-        while curriculum.running:
-            rclpy.spin_once(node, timeout_sec=0.2)
-            check_graph(node, watchdog, progress, started, curriculum)
-        for _ in range(5):  # the last state may still be on its way
-            rclpy.spin_once(node, timeout_sec=0.1)
-        progress.close()
-        exit_code = curriculum.process.returncode
-        if exit_code:
-            print(f"curriculum_node ended with exit code {exit_code}: see {curriculum.log_path}")
+        exit_code = follow_curriculum(node, watchdog, progress, started, curriculum)
     except KeyboardInterrupt:
         progress.close()
         print("interrupted: stopping the graph; the same command resumes the run")
@@ -300,22 +265,99 @@ def launch(strategy: str, preset: str, seed: int, run_dir: Path, startup_timeout
         print(f"the run is stuck: {stalled}\nstopping the graph; the same command resumes the run", flush=True)
         exit_code = EXIT_STALLED
     finally:
-        for process in reversed(started):
-            code = process.stop(signal.SIGINT)
-            if code not in (0, None) and process.node != "curriculum_node":
-                print(f"{process.node} exited with {code}: see {process.log_path}")
-                exit_code = exit_code or code
+        node_failure = stop_graph(started)  # always: every node gets its SIGINT
+        exit_code = exit_code or node_failure
         node.destroy_node()
         rclpy.try_shutdown()
         domain.close()
+    print_bag_summary(bag)
+    if report:
+        write_run_report([run_dir], run_dir / "report")
+    return exit_code
+
+
+def launcher_node(domain_id: int, namespace: str):
+    """The launcher's own node, in the graph's namespace, with SIGINT and SIGTERM raising KeyboardInterrupt.
+
+    SIGINT is the launcher's to handle (stop the graph in order). rclpy's handler would shut the
+    context down first, and a spin_once in progress then raises ExternalShutdownException instead
+    (seen under load); SIGTERM stops the graph as Ctrl-C does. Set, not inherited: a launcher started
+    as a script's background job inherits SIGINT ignored (POSIX shells do that to async commands), and
+    Python then leaves it so: Ctrl-C did nothing. In the namespace: the names it uses are relative
+    (node_common.names), so the progress, the watchdog and the learner probe hear this graph's nodes
+    and no other's.
+    """
+    configure_discovery()  # the launcher's own participant on loopback too
+    rclpy.init(domain_id=domain_id, signal_handler_options=SignalHandlerOptions.NO)
+    signal.signal(signal.SIGINT, signal.default_int_handler)
+    signal.signal(signal.SIGTERM, signal.default_int_handler)
+    return rclpy.create_node("glocal_ros_launch", namespace=namespace or None)
+
+
+def listen_for_progress(node, progress: Progress, watchdog: Watchdog) -> None:
+    """What the progress bar shows and the watchdog hears: curriculum states, training progress, episodes."""
+    def heard(what: str, handle=lambda message: None):
+        return lambda message: (watchdog.heard(what), handle(message))
+
+    node.create_subscription(CurriculumState, names.CURRICULUM_STATE, heard(CURRICULUM_HEARD, progress.on_state),
+                             qos.LATCHED)
+    node.create_subscription(TrainingProgress, names.TRAINING_PROGRESS, heard("training progress",
+                                                                              progress.on_progress), qos.EVENTS)
+    # Raw: the watchdog only needs to know that an episode came, not what it holds.
+    node.create_subscription(EpisodeRecord, names.EPISODES, heard("an episode"), qos.EPISODES, raw=True)
+
+
+def wait_for_recorder(node, started: Sequence[NodeProcess], timeout: float) -> None:
+    """Until the recorder listens to the sim's episode stream, so that the bag holds every episode from seq 0.
+
+    ``RuntimeError`` naming the node and its log when a started node ends, or after ``timeout`` seconds.
+    """
+    deadline = time.monotonic() + timeout
+    while node.count_subscribers(names.EPISODES) < 1 or node.count_publishers(names.EPISODES) < 1:
+        rclpy.spin_once(node, timeout_sec=0.1)
+        failed = [p for p in started if not p.running]
+        if failed or time.monotonic() > deadline:
+            culprit = (failed or started)[0]
+            raise RuntimeError(f"{culprit.node} did not start: see {culprit.log_path}")
+
+
+def follow_curriculum(node, watchdog: Watchdog, progress: Progress, started: Sequence[NodeProcess],
+                      curriculum: NodeProcess) -> int:
+    """Show the run's progress until the curriculum node ends; its exit code. ``GraphStalled`` from the watchdog."""
+    while curriculum.running:
+        rclpy.spin_once(node, timeout_sec=0.2)
+        check_graph(node, watchdog, progress, started, curriculum)
+    for _ in range(5):  # the last state may still be on its way
+        rclpy.spin_once(node, timeout_sec=0.1)
+    progress.close()
+    exit_code = curriculum.process.returncode
+    if exit_code:
+        print(f"curriculum_node ended with exit code {exit_code}: see {curriculum.log_path}")
+    return exit_code
+
+
+def stop_graph(started: Sequence[NodeProcess]) -> int:
+    """SIGINT to every node, the last started first, so that the recorder closes the bag after the others.
+
+    Returns the first non-zero exit code of a node other than the curriculum (whose own code the run
+    already has), else 0; each such node is named with its log.
+    """
+    first_failure = 0
+    for process in reversed(started):
+        code = process.stop(signal.SIGINT)
+        if code not in (0, None) and process.node != "curriculum_node":
+            print(f"{process.node} exited with {code}: see {process.log_path}")
+            first_failure = first_failure or code
+    return first_failure
+
+
+def print_bag_summary(bag: Path) -> None:
+    """The bag's message count per topic, or how to recover it when the recorder did not close it."""
     if (bag / "metadata.yaml").is_file():
         counts = ", ".join(f"{topic} {count}" for topic, count in message_counts(bag).items() if count)
         print(f"bag: {bag} ({counts})")
     else:
         print(f"bag: {bag} was not closed (see the recorder's log); `glocal-ros bag repair {bag}` recovers it")
-    if report:
-        write_run_report([run_dir], run_dir / "report")
-    return exit_code
 
 
 def write_run_report(run_dirs: Sequence[Path], out_dir: Path) -> None:

@@ -235,7 +235,7 @@ def test_namespace_sim_time_and_profile_reach_launch_and_experiment(monkeypatch,
     assert main(["launch", "--preset", "smoke", "--out", str(tmp_path), "--namespace", "robot1",
                  "--use-sim-time", "--profile", "paper"]) == 0
     assert main(["experiment", "--strategies", "random", "--seeds", "0", "--out", str(tmp_path)]) == 0
-    assert calls[0][1] == {"namespace": "robot1", "use_sim_time": True, "learner_profile": "paper"}
+    assert calls[0][1] == {"namespace": "robot1", "use_sim_time": True, "learner_profile": "paper", "foxglove": None}
     assert calls[1][1] == {"namespace": "", "use_sim_time": False, "step_budget": None, "learner_profile": None,
                            "ray_address": None, "ray_cpus_per_run": 2}
     assert main(["experiment", "--strategies", "random", "--seeds", "0", "--out", str(tmp_path), "--ray",
