@@ -65,7 +65,7 @@ class CurriculumNode(Node):
         self.state_pub = self.create_publisher(CurriculumState, names.CURRICULUM_STATE, qos.LATCHED)
         self.assignment_pub = self.create_publisher(TaskAssignment, names.TASK_ASSIGNMENT, qos.LATCHED)
         self.learner = RosLearner(self, self.learner_timeout)
-        self.journal = JournaledLearner(self.learner, self.state_dir / "journal.jsonl", asdict(self.config),
+        self.journal = JournaledLearner(self.learner, self.state_dir / "journal.jsonl", self.config.journal_settings(),
                                         seed=self.config.seed)
         if self.journal.replaying:
             self.get_logger().info(f"resuming {self.config.run_id} from {self.journal.path}")

@@ -9,7 +9,6 @@ call, seed and answer of today's runs.
 from __future__ import annotations
 
 import sys
-from dataclasses import asdict
 from pathlib import Path
 
 sys.path.insert(0, str(Path(__file__).parent))
@@ -29,7 +28,7 @@ STRATEGIES = ("glocal", "glocal_random_cluster", "glocal_no_global", "random")
 
 def write_journal(strategy: str, path: Path) -> None:
     config = RunConfig(strategy, TASKS, **SETTINGS)
-    journal = JournaledLearner(SimulatedLearner(seed=1, lockstep_envs=2), path, asdict(config), seed=config.seed)
+    journal = JournaledLearner(SimulatedLearner(seed=1, lockstep_envs=2), path, config.journal_settings(), seed=config.seed)
     run_strategy(Run(config, journal))
 
 
