@@ -3,6 +3,8 @@
 The completion order is the test's (``SteppedCalls``): first started first, or last started first.
 """
 
+import json
+
 import pytest
 
 from glocal_ros.curriculum.codes import ROLE_GLOBAL, ROLE_LOCAL, STATUS_FINISHED
@@ -126,3 +128,54 @@ def _keys(path):
     import json
 
     return [json.loads(line)["key"] for line in path.read_text().splitlines()[1:]]
+
+
+class Gone(RuntimeError):
+    """A learner left the graph and did not come back in time."""
+
+
+class LeavesMidGoal:
+    """A learner that fails its first ``fails`` train calls of local tasks, as a killed pair does."""
+
+    def __init__(self, learner, fails):
+        self.learner, self.fails, self.failed = learner, fails, []
+
+    def __getattr__(self, name):
+        return getattr(self.learner, name)
+
+    def train(self, request):
+        if len(self.failed) < self.fails and ".L" in request.output_policy:
+            self.failed.append(request.output_policy)
+            raise Gone(request.output_policy)
+        return self.learner.train(request)
+
+
+def pool_with_a_leaving_pair(tmp_path, fails):
+    store = SimulatedLearner(seed=1, lockstep_envs=2)
+    leaving = LeavesMidGoal(store, fails)
+    path = tmp_path / "journal.jsonl"
+    the_run = Run(config("glocal", parallel_locals=True, **SHORT), store, Recorder(), learners=[store, leaving],
+                  journal=CallJournal(path, {}), calls=SteppedCalls(LAST_STARTED_FIRST), resend_on=(Gone,))
+    return the_run, leaving, path
+
+
+def test_a_goal_whose_pair_left_goes_to_a_free_pair_and_the_run_goes_on(tmp_path):
+    uninterrupted, _, _, _ = parallel_run(2, LAST_STARTED_FIRST)
+    the_run, leaving, path = pool_with_a_leaving_pair(tmp_path, fails=1)
+    run_strategy(the_run)
+    assert the_run.state.status == STATUS_FINISHED and leaving.failed
+    keys = _keys(path)
+    assert len(keys) == len(set(keys)), "every call answered once"
+    answered = {json.loads(line)["arguments"].get("output_policy") for line in path.read_text().splitlines()[1:]}
+    assert set(leaving.failed) <= answered, "the goal of the pair that left was answered after all"
+    assert sorted(the_run.state.learned_tasks) == sorted(uninterrupted.state.learned_tasks)
+
+
+def test_a_call_that_fails_on_every_send_ends_the_run(tmp_path):
+    the_run, leaving, _ = pool_with_a_leaving_pair(tmp_path, fails=10**6)
+    the_run.learners = [leaving, leaving]
+    with pytest.raises(Gone):
+        run_strategy(the_run)
+    from glocal_ros.curriculum.run import MAX_SENDS
+
+    assert len(leaving.failed) == MAX_SENDS

@@ -32,6 +32,10 @@ answer with its key and the learner that gave it, in the order they came; a
 resumed run takes its answers from it in that order (queuing nothing on the
 learners until the journal is spent), then sends the calls still
 outstanding, the ones in flight at the kill among them, in any order.
+A call whose learner went away (``resend_on``: a killed pair that did not
+come back in time) goes back to the front of the queue, to the next free
+learner, the same one when it is back (a Train goal resumes from its
+checkpoint in the shared policy store), up to ``MAX_SENDS`` sends in all.
 The budget counts the steps reserved by goals in flight: a new goal is
 clipped to what is left after them, and a goal hands back what it did not use
 when it ends.
@@ -56,6 +60,9 @@ from glocal_ros.curriculum.learner import (PAPER_EVAL_EPISODES, Learner, TrainRe
                                            paper_threshold)
 from glocal_ros.seeds import derived_seed
 from glocal_ros.tasks import sorted_tasks, validate_tasks
+
+#: Most times an outstanding call is sent to a learner before its failure ends the run.
+MAX_SENDS = 3
 
 _STATUS_OF_ROLE = {ROLE_GLOBAL: STATUS_TRAINING_GLOBAL, ROLE_LOCAL: STATUS_TRAINING_LOCAL,
                    ROLE_SAMPLED: STATUS_TRAINING, ROLE_CLUSTER: STATUS_TRAINING}
@@ -216,9 +223,12 @@ class _Call:
 class Run:
     def __init__(self, config: RunConfig, learner: Learner, observer: RunObserver | None = None, *,
                  learners: Sequence[Learner] = (), journal: CallJournal | None = None,
-                 calls: CallRunner | None = None):
+                 calls: CallRunner | None = None, resend_on: tuple[type[BaseException], ...] = ()):
         """``learner`` answers the blocking calls; ``learners`` (default: ``learner`` alone) the
-        outstanding ones, run by ``calls`` (default: a thread each) and journaled in ``journal``."""
+        outstanding ones, run by ``calls`` (default: a thread each) and journaled in ``journal``.
+        An outstanding call that raises one of ``resend_on`` (its learner went away and did not come
+        back in time) goes back to the front of the queue, for the next free learner, up to
+        ``MAX_SENDS`` times in all; any other exception ends the run (which resumes from its journal)."""
         self.config = config
         self.learner = learner
         self.learners = list(learners) or [learner]
@@ -227,6 +237,8 @@ class Run:
         self._outstanding: dict[str, _Call] = {}  # by key: queued or running, not answered
         self._queued: deque[str] = deque()
         self._running: dict[int, str] = {}  # learner slot -> key
+        self.resend_on = resend_on
+        self._sends: dict[str, int] = {}  # key -> times sent to a learner
         self.observer = observer or _NoObserver()
         self.state = RunState(run_id=config.run_id, seed=config.seed, strategy=config.strategy,
                               step_budget=config.step_budget, milestone_interval=config.milestone_interval,
@@ -353,6 +365,7 @@ class Run:
         while self._queued and free:
             slot, key = free.pop(0), self._queued.popleft()
             self._running[slot] = key
+            self._sends[key] = self._sends.get(key, 0) + 1
             self.calls.start(slot, self.learners[slot], key, self._outstanding[key].ask)
 
     def _take_answer(self) -> None:
@@ -371,6 +384,10 @@ class Run:
             self._dispatch()
             slot, key, answer = self.calls.next_done()
             del self._running[slot]
+            if isinstance(answer, self.resend_on) and self._sends[key] < MAX_SENDS:
+                self._queued.appendleft(key)  # a Train goal sent again resumes from its checkpoint
+                self._dispatch()
+                return
             if isinstance(answer, BaseException):
                 raise answer
             call = self._outstanding[key]
