@@ -12,6 +12,15 @@ The run resumes: every answered learner call is journaled in ``state_dir``
 (``glocal_ros.curriculum.journal``), so a node started again with the same
 parameters and ``state_dir`` goes on where the last one stopped;
 ``state_dir/state.json`` holds the latest state for people and scripts.
+
+Several pairs: ``learner_namespaces`` (comma-separated, e.g.
+``pair0,pair1``; default "", the learner in this node's own namespace) names
+the learners, one ``RosLearner`` each. With ``parallel_locals`` GloCAL sends
+its local tasks to whichever is free (``glocal_ros.curriculum.glocal``); the
+journal is then keyed by call and says which learner (its index in
+``learner_namespaces``) answered each; a call whose learner left and did not
+come back within ``learner_timeout_sec`` goes to the next free one. Without
+``parallel_locals`` the run is sequential and uses the first learner only.
 """
 
 from __future__ import annotations
@@ -28,7 +37,7 @@ from rclpy.duration import Duration
 from rclpy.node import Node
 
 from glocal_ros.curriculum.codes import BASELINE_TASKS
-from glocal_ros.curriculum.journal import JournaledLearner
+from glocal_ros.curriculum.journal import CallJournal, JournaledLearner
 from glocal_ros.files import atomic_write
 from glocal_ros.paths import ros_home
 from glocal_ros.sim_contract import DEFAULT_EPISODE_STEPS
@@ -37,6 +46,7 @@ from glocal_ros.curriculum.strategies import STRATEGIES, run_strategy
 from glocal_ros.tasks import parse_task_list
 from curriculum_node.ros_learner import LearnerStopped, RosLearner
 from node_common import names, qos
+from node_common.calls import ServiceCallError
 from node_common.params import declare
 from node_common.runner import spin_node
 
@@ -64,9 +74,18 @@ class CurriculumNode(Node):
 
         self.state_pub = self.create_publisher(CurriculumState, names.CURRICULUM_STATE, qos.LATCHED)
         self.assignment_pub = self.create_publisher(TaskAssignment, names.TASK_ASSIGNMENT, qos.LATCHED)
-        self.learner = RosLearner(self, self.learner_timeout)
-        self.journal = JournaledLearner(self.learner, self.state_dir / "journal.jsonl", asdict(self.config),
-                                        seed=self.config.seed)
+        namespaces = declare(self, "learner_namespaces", "", "the learners, comma-separated namespaces "
+                             "(e.g. pair0,pair1; / for the root); '' for this node's own")
+        self.learner_namespaces = learner_namespace_list(namespaces)
+        self.learners = [RosLearner(self, self.learner_timeout, namespace=namespace)
+                         for namespace in self.learner_namespaces]
+        self.learner = self.learners[0]
+        journal_path = self.state_dir / "journal.jsonl"
+        if self.config.parallel_locals:
+            self.journal = CallJournal(journal_path, self.config.journal_settings())
+        else:
+            self.journal = JournaledLearner(self.learner, journal_path, self.config.journal_settings(),
+                                            seed=self.config.seed)
         if self.journal.replaying:
             self.get_logger().info(f"resuming {self.config.run_id} from {self.journal.path}")
         self.exit_code = 0
@@ -108,12 +127,19 @@ class CurriculumNode(Node):
                                             "random: episodes per Train goal", **positive),
             baseline_tasks=declare(self, "baseline_tasks", _DEFAULTS["baseline_tasks"],
                                    f"baselines draw from: {' or '.join(BASELINE_TASKS)} tasks"),
+            parallel_locals=declare(self, "parallel_locals", _DEFAULTS["parallel_locals"],
+                                    "GloCAL: local tasks on free learners at once, overlapping the next iteration"),
         )
 
     def run(self) -> None:
         try:
-            self.learner.wait_for_learner()
-            run = Run(self.config, self.journal, self)
+            for learner in self.learners:
+                learner.wait_for_learner()
+            if self.config.parallel_locals:
+                run = Run(self.config, self.learner, self, learners=self.learners, journal=self.journal,
+                          resend_on=(ServiceCallError,))
+            else:
+                run = Run(self.config, self.journal, self)
             run_strategy(run, self.max_episode_steps)
             self.get_logger().info(
                 f"{self.config.run_id} finished: {len(run.state.learned_tasks)}/{len(self.config.tasks)} tasks "
@@ -188,6 +214,14 @@ def state_message(state: RunState, stamp) -> CurriculumState:
     )
     message.header.stamp = stamp
     return message
+
+
+def learner_namespace_list(text: str) -> list[str]:
+    """``learner_namespaces`` as a list ("" alone for the node's own namespace); repeats refused."""
+    namespaces = ["/" + part.strip().strip("/") if part.strip().strip("/") else "" for part in text.split(",")]
+    if len(set(namespaces)) != len(namespaces):
+        raise ValueError(f"learner_namespaces repeat: {text!r}")
+    return namespaces
 
 
 def default_state_dir(run_id: str) -> Path:

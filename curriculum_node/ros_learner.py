@@ -61,14 +61,16 @@ class _NoAnswer(Exception):
 
 class RosLearner:
     def __init__(self, node: Node, timeout_sec: float,
-                 on_feedback: Callable[[Train.Feedback], None] = lambda feedback: None):
+                 on_feedback: Callable[[Train.Feedback], None] = lambda feedback: None, namespace: str = ""):
+        """``namespace``: the learner's (e.g. ``/pair1``); "" for the node's own."""
         group = ReentrantCallbackGroup()
         self.node = node
         self.timeout_sec = timeout_sec
         self.on_feedback = on_feedback
-        self._evaluate = node.create_client(Evaluate, names.LEARNER_EVALUATE, callback_group=group)
-        self._copy = node.create_client(CopyPolicy, names.LEARNER_COPY_POLICY, callback_group=group)
-        self._train = ActionClient(node, Train, names.LEARNER_TRAIN, callback_group=group)
+        prefix = f"/{namespace.strip('/')}/" if namespace.strip("/") else ""
+        self._evaluate = node.create_client(Evaluate, prefix + names.LEARNER_EVALUATE, callback_group=group)
+        self._copy = node.create_client(CopyPolicy, prefix + names.LEARNER_COPY_POLICY, callback_group=group)
+        self._train = ActionClient(node, Train, prefix + names.LEARNER_TRAIN, callback_group=group)
         # What the recovery below had to do (``glocal-ros bench graph`` reports them).
         self.goals_sent_again = 0  # a goal response lost, or the learner left mid-goal
         self.results_asked_again = 0  # the goal ended, its result response did not come

@@ -114,3 +114,40 @@ class SimulatedLearner:
 def _distance(a: str, b: str) -> float:
     (ra, ca), (rb, cb) = grid_coordinates(a), grid_coordinates(b)
     return math.hypot(ra - rb, ca - cb)
+
+
+class SteppedCalls:
+    """A ``CallRunner`` for tests: a started call runs only when the test's ``choose`` picks it to end next.
+
+    ``choose`` gets the keys of the started calls in the order they started and returns the index of the
+    one to end: so the test, not thread timing, decides the completion order. ``started`` lists every
+    (slot, key) in the order they started; ``ends_after`` answers that many calls, then raises ``Killed``
+    as a killed curriculum node would stop.
+    """
+
+    def __init__(self, choose=lambda keys: 0, ends_after: int | None = None):
+        self.choose, self.left = choose, ends_after
+        self.running: list[tuple[int, object, str, object]] = []
+        self.started: list[tuple[int, str]] = []
+        self.overlaps: list[tuple[str, tuple[str, ...]]] = []  # a call's key, and the keys running when it started
+
+    def start(self, slot, learner, key, ask):
+        self.overlaps.append((key, tuple(k for _, _, k, _ in self.running)))
+        self.running.append((slot, learner, key, ask))
+        self.started.append((slot, key))
+
+    def next_done(self):
+        if self.left is not None:
+            if self.left == 0:
+                raise Killed()
+            self.left -= 1
+        slot, learner, key, ask = self.running.pop(self.choose([k for _, _, k, _ in self.running]))
+        try:
+            answer = ask(learner)
+        except Exception as error:  # noqa: BLE001 - as ThreadedCalls hands it on
+            answer = error
+        return slot, key, answer
+
+
+class Killed(Exception):
+    pass

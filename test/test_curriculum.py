@@ -408,3 +408,14 @@ def test_every_named_strategy_exists():
     from glocal_ros.curriculum.codes import STRATEGY_NAMES
 
     assert tuple(STRATEGIES) == STRATEGY_NAMES
+
+
+@pytest.mark.parametrize("strategy", ["glocal", "glocal_random_cluster", "glocal_no_global", "random"])
+def test_sequential_journals_are_unchanged(tmp_path, strategy):
+    """A sequential run (``parallel_locals: false``) asks, seeds and journals exactly what it did before the
+    run became a scheduler of outstanding calls: byte for byte (see ``sequential_journals``)."""
+    from sequential_journals import REFERENCES, write_journal
+
+    written = tmp_path / "journal.jsonl"
+    write_journal(strategy, written)
+    assert written.read_bytes() == (REFERENCES / f"{strategy}.jsonl").read_bytes()

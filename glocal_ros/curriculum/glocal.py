@@ -31,6 +31,32 @@ Choices the paper leaves open, made here:
   unlike the local chain), and a task it did not learn returns to the pool.
 - An iteration whose clustering leaves no task it could train (all budget
   spent) ends the run; so do an empty pool and ``max_iter``.
+
+Parallel locals (``parallel_locals: true``, GloCAL and
+``glocal_random_cluster``; ``glocal_no_global``'s sweep is one policy
+through the cluster, so it stays sequential, as do the baselines). The local
+tasks of iteration m need only pi_G,m, so they go out as soon as it exists,
+each to the next free learner (``Run.start_train``), while the run goes on
+to iteration m+1. The orderings that change, against the sequential run:
+- Every local task of iteration m starts from pi_G,m: there is no chain
+  (pi_L,m,i does not start from pi_L,m,i-1).
+- Iteration m+1 starts while locals of m are in flight: it evaluates
+  pi_curr = pi_G,m on the remaining tasks that are not in flight (a task
+  in flight is neither clustered nor trained twice at once), clusters them
+  and trains its global task. A local that ends unlearned returns to the
+  pool and is scored by the first evaluation after it ends.
+- A task counts as learned, and its step as the run's total, when its goal's
+  answer comes, in the order answers come (so learned_at_steps is a function
+  of the completion order, which the journal keeps).
+- The budget counts the steps reserved by goals in flight: a goal is clipped
+  to what is left after them. When none is left, the run waits for a goal to
+  end (and hand back what it did not use) before it starts an iteration, and
+  one that finds no steps left after its evaluation trains nothing and goes on.
+- When every remaining task is in flight, the run waits for an answer.
+- Seeds come from the run seed and the call's key (``m3/local/B1``), not the
+  call's place, and the journal is keyed by call.
+With one learner, the calls are queued first in, first out: the locals of m
+then run before the evaluation of m+1, whose pool still leaves them out.
 """
 
 from __future__ import annotations
@@ -38,7 +64,7 @@ from __future__ import annotations
 import numpy as np
 
 from glocal_ros.clustering import cluster_tasks, split_global_local
-from glocal_ros.curriculum.learner import TrainRequest
+from glocal_ros.curriculum.learner import TrainRequest, TrainResult
 from glocal_ros.curriculum.codes import ROLE_CLUSTER, ROLE_GLOBAL, ROLE_LOCAL
 from glocal_ros.curriculum.run import Run
 
@@ -47,6 +73,9 @@ def run_glocal(run: Run, ablation: str = "") -> None:
     """GloCAL; ``ablation`` is "", "no_global" or "random_cluster"."""
     if ablation not in ("", "no_global", "random_cluster"):
         raise ValueError(f"unknown GloCAL ablation {ablation!r}")
+    if run.config.parallel_locals and ablation != "no_global":
+        run_glocal_parallel_locals(run, ablation == "random_cluster")
+        return
     config = run.config
     rng = np.random.default_rng(config.seed)
     current = config.initial_policy
@@ -73,6 +102,56 @@ def run_glocal(run: Run, ablation: str = "") -> None:
             current = global_policy
         run.set_current_policy(current)
     run.finish()
+
+
+def run_glocal_parallel_locals(run: Run, random_cluster: bool) -> None:
+    """GloCAL with each iteration's local tasks on free learners, overlapping the next iteration."""
+    config = run.config
+    rng = np.random.default_rng(config.seed)
+    current = config.initial_policy
+    iteration = 0
+    while iteration < config.max_iter and not run.over:
+        idle = [task for task in run.state.remaining_tasks if task not in run.tasks_in_flight]
+        if not idle or run.steps_left == 0:
+            run.wait_any()  # something is in flight, or the run would be over
+            continue
+        iteration += 1
+        run.begin_iteration(iteration)
+        key = f"m{iteration}"
+        scores: dict[str, float] = {}
+        run.start_evaluate(current, idle, f"{key}/evaluate", scores.update)
+        run.wait_for(f"{key}/evaluate")
+        clustering = cluster_tasks(scores, config.k_min, config.k_max, seed=config.seed + iteration)
+        chosen = int(rng.integers(len(clustering.clusters))) if random_cluster else 0
+        global_task, local_tasks = split_global_local(clustering.clusters[chosen])
+        run.show_clustering(clustering, chosen, global_task, local_tasks)
+        if run.steps_left == 0:
+            continue
+        global_policy = config.policy_name(f"G{iteration}")
+        _start_task(run, ROLE_GLOBAL, global_task, current, global_policy, f"{key}/global/{global_task}")
+        run.wait_for(f"{key}/global/{global_task}")
+        for index, task in enumerate(local_tasks):
+            if run.steps_left == 0:
+                break
+            output = config.policy_name(f"L{iteration}_{index}")
+            _start_task(run, ROLE_LOCAL, task, global_policy, output, f"{key}/local/{task}")
+        current = global_policy
+        run.set_current_policy(current)
+    run.wait_all()
+    run.finish()
+
+
+def _start_task(run: Run, role: int, task: str, initial: str, output: str, key: str) -> None:
+    """Queue ``task`` until learned or out of its budget; marked learned when its answer says so."""
+    def done(result: TrainResult) -> None:
+        if result.learned:
+            run.mark_learned(task, output)
+
+    config = run.config
+    run.start_train(role, TrainRequest(
+        task=task, initial_policy=initial, output_policy=output, step_budget=config.task_step_budget,
+        eval_interval=config.eval_interval, stop_when_learned=True,
+    ), key, done)
 
 
 def _train_chain(run: Run, role: int, first: str, tasks: list[str], names: str, every_policy: bool) -> str:

@@ -20,6 +20,14 @@ function of the run seed, the call and the policies it reads, not of what
 the learner and the sim did before. So a run resumed after a kill, with its
 nodes restarted or not, asks and hears the same as the uninterrupted run
 from the kill on, down to every episode (limits: ``Trainer._seeded``).
+
+Runs with outstanding calls (``parallel_locals``) journal by key instead:
+``CallJournal`` holds each answer under the key that names its call (and
+the learner slot that gave it), in the order the answers came, and
+``Run`` replays them in that order (see ``glocal_ros.curriculum.run``).
+Their seeds come from the run seed and the key, so that a call asks the
+same whichever learner runs it and whenever. Both journals share the file
+format: a first line with the settings, then one answered call a line.
 """
 
 from __future__ import annotations
@@ -50,18 +58,7 @@ class JournaledLearner:
         self.path = Path(path)
         self.seed = seed
         self._calls = 0  # calls of this run so far, replayed or live: the next call's index
-        self._replay: list[dict] = []
-        if self.path.is_file():
-            lines = _read_entries(self.path)
-            if lines and lines[0].get("config") != _plain(config):
-                raise JournalMismatch(
-                    f"{self.path} belongs to a run with other settings: {lines[0].get('config')}; "
-                    "use another state directory or the same settings"
-                )
-            self._replay = lines[1:]
-        else:
-            self.path.parent.mkdir(parents=True, exist_ok=True)
-            self._append({"config": _plain(config)})
+        self._replay = _open_journal(self.path, config)
         self.replayed = 0
 
     @property
@@ -106,10 +103,54 @@ class JournaledLearner:
         return answer
 
     def _append(self, entry: dict) -> None:
-        with open(self.path, "a") as stream:
-            stream.write(json.dumps(entry) + "\n")
-            stream.flush()
-            os.fsync(stream.fileno())
+        _append(self.path, entry)
+
+
+class CallJournal:
+    """Answers of outstanding calls by key, in the order they came (see the module doc)."""
+
+    def __init__(self, path: Path, config: dict[str, Any]):
+        self.path = Path(path)
+        self._replay = _open_journal(self.path, config)
+        self.replayed = 0
+
+    @property
+    def replaying(self) -> bool:
+        return self.replayed < len(self._replay)
+
+    def next_entry(self) -> dict:
+        entry = self._replay[self.replayed]
+        if "key" not in entry:
+            raise JournalMismatch(f"{self.path}, entry {self.replayed + 1}: no key (a sequential run's journal)")
+        self.replayed += 1
+        return entry
+
+    def record(self, key: str, learner: int, name: str, arguments: dict, answer: Any, cost: dict[str, int]) -> None:
+        _append(self.path, {"key": key, "learner": learner, "call": name, "arguments": arguments,
+                            "answer": _plain(answer), "cost": cost})
+
+
+def _open_journal(path: Path, config: dict[str, Any]) -> list[dict]:
+    """The answered calls of the journal at ``path`` (written by a run with ``config``); a new journal
+    gets its first line."""
+    if not path.is_file():
+        path.parent.mkdir(parents=True, exist_ok=True)
+        _append(path, {"config": _plain(config)})
+        return []
+    lines = _read_entries(path)
+    if lines and lines[0].get("config") != _plain(config):
+        raise JournalMismatch(
+            f"{path} belongs to a run with other settings: {lines[0].get('config')}; "
+            "use another state directory or the same settings"
+        )
+    return lines[1:]
+
+
+def _append(path: Path, entry: dict) -> None:
+    with open(path, "a") as stream:
+        stream.write(json.dumps(entry) + "\n")
+        stream.flush()
+        os.fsync(stream.fileno())
 
 
 def _read_entries(path: Path) -> list[dict]:
@@ -136,3 +177,7 @@ def _plain(value: Any) -> Any:
 def _train_result(answer: dict) -> TrainResult:
     episodes = tuple(EpisodeSummary(**episode) for episode in answer["episodes"])
     return TrainResult(answer["learned"], answer["score"], answer["steps_used"], episodes)
+
+
+plain = _plain
+train_result = _train_result

@@ -17,22 +17,52 @@ Choices:
 - A finished run's learned count is final, so ``finish`` records it at
   every milestone up to the budget: a run that learned everything early
   stands in the milestone table beside those that used the whole budget.
+
+Outstanding calls (``parallel_locals``): besides the blocking ``train`` and
+``evaluate`` that sequential strategies call (through the one ``learner``,
+journaled by position: ``glocal_ros.curriculum.journal.JournaledLearner``),
+a run schedules calls over a pool of K learners. ``start_train`` and
+``start_evaluate`` queue a call under a key that names it (e.g.
+``m3/local/B1``), with a seed derived from the run seed and that key; the
+queue goes first in, first out to the free learners (lowest index first);
+``wait_for``, ``wait_any`` and ``wait_all`` take answers in the order they
+come and hand each to its call's ``when_done`` in the strategy's thread, so
+every decision is made between two answers. A ``CallJournal`` records each
+answer with its key and the learner that gave it, in the order they came; a
+resumed run takes its answers from it in that order (queuing nothing on the
+learners until the journal is spent), then sends the calls still
+outstanding, the ones in flight at the kill among them, in any order.
+A call whose learner went away (``resend_on``: a killed pair that did not
+come back in time) goes back to the front of the queue, to the next free
+learner, the same one when it is back (a Train goal resumes from its
+checkpoint in the shared policy store), up to ``MAX_SENDS`` sends in all.
+The budget counts the steps reserved by goals in flight: a new goal is
+clipped to what is left after them, and a goal hands back what it did not use
+when it ends.
 """
 
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass, field, replace
-from typing import Protocol
+import queue
+import threading
+from collections import deque
+from dataclasses import asdict, dataclass, field, replace
+from typing import Any, Callable, Protocol, Sequence
 
 from glocal_ros.clustering import Clustering
 from glocal_ros.curriculum.codes import (
     ROLE_CLUSTER, ROLE_GLOBAL, ROLE_LOCAL, ROLE_SAMPLED, STATUS_EVALUATING, STATUS_FINISHED, STATUS_STARTING,
     STATUS_TRAINING, STATUS_TRAINING_GLOBAL, STATUS_TRAINING_LOCAL, BASELINE_TASKS,
 )
+from glocal_ros.curriculum.journal import CallJournal, JournalMismatch, plain, train_result
 from glocal_ros.curriculum.learner import (PAPER_EVAL_EPISODES, Learner, TrainRequest, TrainResult,
                                            paper_threshold)
+from glocal_ros.seeds import derived_seed
 from glocal_ros.tasks import sorted_tasks, validate_tasks
+
+#: Most times an outstanding call is sent to a learner before its failure ends the run.
+MAX_SENDS = 3
 
 _STATUS_OF_ROLE = {ROLE_GLOBAL: STATUS_TRAINING_GLOBAL, ROLE_LOCAL: STATUS_TRAINING_LOCAL,
                    ROLE_SAMPLED: STATUS_TRAINING, ROLE_CLUSTER: STATUS_TRAINING}
@@ -58,6 +88,7 @@ class RunConfig:
     baseline_eval_interval: int = 100_000  # baselines: env steps between evaluations on every unlearned task
     baseline_chunk_episodes: int = 100  # random: episodes sampled per Train goal
     baseline_tasks: str = "all"  # baselines draw from "all" tasks or the "unlearned" ones (see ``baselines``)
+    parallel_locals: bool = False  # GloCAL: local tasks on free learners at once (``glocal``); baselines ignore it
 
     def __post_init__(self) -> None:
         if not self.tasks:
@@ -83,6 +114,14 @@ class RunConfig:
     def policy_name(self, suffix: str) -> str:
         """Policies of a run carry its id, so runs can share a policy store."""
         return f"{self.run_id}.{suffix}"
+
+    def journal_settings(self) -> dict[str, Any]:
+        """The settings a journal's first line holds: ``parallel_locals`` only when set, so that sequential
+        runs write (and resume) the journals they wrote before it existed."""
+        settings = asdict(self)
+        if not self.parallel_locals:
+            del settings["parallel_locals"]
+        return settings
 
 
 @dataclass(frozen=True)
@@ -139,10 +178,67 @@ class _NoObserver:
         pass
 
 
+class CallRunner(Protocol):
+    """Where outstanding calls run: ``start`` one on a learner, ``next_done`` waits for any to end."""
+
+    def start(self, slot: int, learner: Learner, key: str, ask: Callable[[Learner], Any]) -> None: ...
+
+    def next_done(self) -> tuple[int, str, Any]:
+        """(slot, key, answer or the exception the call raised) of the next call to end."""
+
+
+class ThreadedCalls:
+    """Each call in a thread of its own (learners block until they answer); answers in the order they end."""
+
+    def __init__(self) -> None:
+        self._done: queue.Queue[tuple[int, str, Any]] = queue.Queue()
+
+    def start(self, slot: int, learner: Learner, key: str, ask: Callable[[Learner], Any]) -> None:
+        def work() -> None:
+            try:
+                outcome = ask(learner)
+            except Exception as error:  # noqa: BLE001 - handed to the run, which decides
+                outcome = error
+            self._done.put((slot, key, outcome))
+
+        threading.Thread(target=work, name=f"learner{slot}:{key}", daemon=True).start()
+
+    def next_done(self) -> tuple[int, str, Any]:
+        return self._done.get()
+
+
+@dataclass
+class _Call:
+    key: str
+    name: str  # "train" or "evaluate"
+    task: str  # the task a train call decides; ""
+    arguments: dict  # as journaled
+    ask: Callable[[Learner], Any]
+    load: Callable[[Any], Any]  # a journaled answer as the learner gives it
+    cost: Callable[[Any], dict[str, int]]
+    done: Callable[[Any], None]
+    reserved_steps: int = 0
+
+
 class Run:
-    def __init__(self, config: RunConfig, learner: Learner, observer: RunObserver | None = None):
+    def __init__(self, config: RunConfig, learner: Learner, observer: RunObserver | None = None, *,
+                 learners: Sequence[Learner] = (), journal: CallJournal | None = None,
+                 calls: CallRunner | None = None, resend_on: tuple[type[BaseException], ...] = ()):
+        """``learner`` answers the blocking calls; ``learners`` (default: ``learner`` alone) the
+        outstanding ones, run by ``calls`` (default: a thread each) and journaled in ``journal``.
+        An outstanding call that raises one of ``resend_on`` (its learner went away and did not come
+        back in time) goes back to the front of the queue, for the next free learner, up to
+        ``MAX_SENDS`` times in all; any other exception ends the run (which resumes from its journal)."""
         self.config = config
         self.learner = learner
+        self.learners = list(learners) or [learner]
+        self.journal = journal
+        self.calls = calls or ThreadedCalls()
+        self._outstanding: dict[str, _Call] = {}  # by key: queued or running, not answered
+        self._queued: deque[str] = deque()
+        self._running: dict[int, str] = {}  # learner slot -> key
+        self.resend_on = resend_on
+        self._sends: dict[str, int] = {}  # key -> times sent to a learner
         self.observer = observer or _NoObserver()
         self.state = RunState(run_id=config.run_id, seed=config.seed, strategy=config.strategy,
                               step_budget=config.step_budget, milestone_interval=config.milestone_interval,
@@ -153,12 +249,22 @@ class Run:
     # What strategies ask.
     @property
     def steps_left(self) -> int:
-        return max(0, self.config.step_budget - self.state.total_steps - self._stranded_steps)
+        """The budget less the steps trained, stranded, and reserved by goals in flight."""
+        reserved = sum(call.reserved_steps for call in self._outstanding.values())
+        return max(0, self.config.step_budget - self.state.total_steps - self._stranded_steps - reserved)
 
     @property
     def over(self) -> bool:
-        """Every task learned, or the budget spent."""
-        return not self.state.remaining_tasks or self.steps_left == 0
+        """Every task learned, or the budget spent and no goal in flight to hand any back."""
+        return not self.state.remaining_tasks or (self.steps_left == 0 and not self._outstanding)
+
+    @property
+    def tasks_in_flight(self) -> set[str]:
+        return {call.task for call in self._outstanding.values() if call.task}
+
+    @property
+    def in_flight(self) -> int:
+        return len(self._outstanding)
 
     def is_learned(self, task: str) -> bool:
         return task in self.state.learned_tasks
@@ -187,6 +293,109 @@ class Run:
         self._record_milestones(through=self.state.total_steps - 1)
         self._update()
         return result
+
+    # Outstanding calls (see the module doc).
+    def start_evaluate(self, policy: str, tasks: list[str], key: str,
+                       when_done: Callable[[dict[str, float]], None]) -> None:
+        episodes, seed = self.config.eval_episodes, self._seed(key)
+        self._update(status=STATUS_EVALUATING, current_task="")
+
+        def done(scores: dict[str, float]) -> None:
+            self.state.evaluation_episodes += episodes * len(tasks)
+            when_done(scores)
+
+        self._queue(_Call(key, "evaluate", "", plain({"policy": policy, "tasks": list(tasks), "episodes": episodes,
+                                                       "seed": seed}),
+                          lambda learner: learner.evaluate(policy, list(tasks), episodes, seed), lambda a: a,
+                          lambda answer: {"evaluation_episodes": episodes * len(answer)}, done))
+
+    def start_train(self, role: int, request: TrainRequest, key: str,
+                    when_done: Callable[[TrainResult], None]) -> None:
+        """Queue one goal, clipped to the steps left after those in flight (at least 1 must be left)."""
+        steps_left = self.steps_left
+        if steps_left < 1:
+            raise ValueError(f"no steps left for {key}")
+        request = replace(request, step_budget=min(request.step_budget, steps_left),
+                          threshold=self.config.threshold, eval_episodes=self.config.eval_episodes,
+                          seed=self._seed(key))
+        self.observer.assigned(Assignment(self._assignments, self.state.iteration, role, request.task,
+                                          request.episode_tasks, request.initial_policy, request.output_policy,
+                                          request.step_budget))
+        self._assignments += 1
+
+        def done(result: TrainResult) -> None:
+            self.state.total_steps += result.steps_used
+            if request.step_budget == steps_left and result.steps_used == 0 and not result.learned:
+                self._stranded_steps += request.step_budget
+            self._record_milestones(through=self.state.total_steps - 1)
+            self._update()
+            when_done(result)
+
+        self._queue(_Call(key, "train", request.task, plain(request), lambda learner: learner.train(request),
+                          train_result, lambda answer: {"training_steps": answer.steps_used}, done,
+                          reserved_steps=request.step_budget))
+        self._update(status=_STATUS_OF_ROLE[role], current_task=request.task)
+
+    def wait_for(self, key: str) -> None:
+        while key in self._outstanding:
+            self._take_answer()
+
+    def wait_any(self) -> None:
+        self._take_answer()
+
+    def wait_all(self) -> None:
+        while self._outstanding:
+            self._take_answer()
+
+    def _seed(self, key: str) -> int:
+        return derived_seed(self.config.seed, *key.encode())
+
+    def _queue(self, call: _Call) -> None:
+        if call.key in self._outstanding:
+            raise ValueError(f"call {call.key} is outstanding already")
+        self._outstanding[call.key] = call
+        self._queued.append(call.key)
+        self._dispatch()
+
+    def _dispatch(self) -> None:
+        """Queued calls to free learners, first in first out; none while answers come from the journal."""
+        if self.journal is not None and self.journal.replaying:
+            return
+        free = [slot for slot in range(len(self.learners)) if slot not in self._running]
+        while self._queued and free:
+            slot, key = free.pop(0), self._queued.popleft()
+            self._running[slot] = key
+            self._sends[key] = self._sends.get(key, 0) + 1
+            self.calls.start(slot, self.learners[slot], key, self._outstanding[key].ask)
+
+    def _take_answer(self) -> None:
+        """The next answer, from the journal while it lasts, else from the learners; handed to its call."""
+        if not self._outstanding:
+            raise RuntimeError("no call is outstanding")
+        if self.journal is not None and self.journal.replaying:
+            entry = self.journal.next_entry()
+            call = self._outstanding.get(entry["key"])
+            if call is None or (call.name, call.arguments) != (entry["call"], entry["arguments"]):
+                raise JournalMismatch(f"{self.journal.path}: journaled {entry['key']} {entry['call']} "
+                                      f"{entry['arguments']}, but the run has no such call outstanding")
+            self._queued.remove(call.key)
+            answer = call.load(entry["answer"])
+        else:
+            self._dispatch()
+            slot, key, answer = self.calls.next_done()
+            del self._running[slot]
+            if isinstance(answer, self.resend_on) and self._sends[key] < MAX_SENDS:
+                self._queued.appendleft(key)  # a Train goal sent again resumes from its checkpoint
+                self._dispatch()
+                return
+            if isinstance(answer, BaseException):
+                raise answer
+            call = self._outstanding[key]
+            if self.journal is not None:
+                self.journal.record(key, slot, call.name, call.arguments, answer, call.cost(answer))
+        del self._outstanding[call.key]
+        call.done(answer)
+        self._dispatch()
 
     def mark_learned(self, task: str, policy: str) -> None:
         if self.is_learned(task):
