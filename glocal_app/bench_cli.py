@@ -209,6 +209,26 @@ def cmd_bench_curriculum(args: argparse.Namespace) -> int:
     return code
 
 
+def cmd_bench_scale(args: argparse.Namespace) -> int:
+    """A scaling model fitted on a recorded run (``glocal_app.benches.scale``)."""
+    from glocal_app.benches.scale import check_scale, scale_report
+
+    try:
+        check_scale(args.run_dir, args.validate, args.pairs, args.machines)
+    except ValueError as error:
+        print(f"bench scale: {error}", file=sys.stderr)
+        return EXIT_FAILED
+    return write_bench_report(scale_report(args.run_dir, args.validate, args.pairs, args.machines, command_line()),
+                              args.out)
+
+
+def _number_list(text: str) -> list[int]:
+    try:
+        return [int(part) for part in text.split(",")]
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expected comma-separated whole numbers, got {text!r}") from None
+
+
 def _add_rate_arguments(parser: argparse.ArgumentParser, envs: str, steps: int) -> None:
     """The env counts, timed steps and rounds of a bench that times SAC learning (learner, backends)."""
     parser.add_argument("--envs", default=envs, help="comma-separated env counts N")
@@ -243,7 +263,7 @@ def _add_cost_goal_arguments(command: argparse.ArgumentParser, default_envs: int
 
 
 def add_bench_commands(commands) -> None:
-    """``bench sim | graph | learner | backends | transfer | cost | stones | curriculum``."""
+    """``bench sim | graph | learner | backends | transfer | cost | stones | curriculum | scale``."""
     bench = commands.add_parser("bench", help="benchmarks; each writes its table with the command that made it")
     bench_commands = bench.add_subparsers(dest="bench_command", required=True)
     bench_sim = bench_commands.add_parser("sim", help="env steps/s in-process vs through sim_node")
@@ -356,4 +376,18 @@ def add_bench_commands(commands) -> None:
                                        "into --out (default: beside --results, curriculum.md -> curriculum-runs)")
     add_profile_argument(bench_curriculum, default=None)
     bench_curriculum.set_defaults(func=cmd_bench_curriculum)
+
+    bench_scale = bench_commands.add_parser(
+        "scale", help="a scaling model fitted on a recorded sequential run: the wall-clock of the same run with K "
+        "pairs (the real scheduler on a virtual clock) and of the paper's grid on M machines")
+    bench_scale.add_argument("run_dir", type=Path, metavar="RUN_DIR",
+                             help="a finished sequential run (its curriculum/journal.jsonl and bag/)")
+    bench_scale.add_argument("--validate", type=Path, nargs="+", default=[], metavar="RUN_DIR",
+                             help="runs to predict from their own settings, K and answers, beside their measured "
+                                  "wall-clock")
+    bench_scale.add_argument("--pairs", type=_number_list, default=[1, 2, 4, 8], help="K to predict (default 1,2,4,8)")
+    bench_scale.add_argument("--machines", type=_number_list, default=[1, 10, 40],
+                             help="M for the paper's grid (default 1,10,40)")
+    bench_scale.add_argument("--out", type=Path, default=Path("bench/results/scale.md"))
+    bench_scale.set_defaults(func=cmd_bench_scale)
 
