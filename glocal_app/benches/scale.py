@@ -111,7 +111,9 @@ def scale_report(run_dir: Path, validate: Sequence[Path], pairs: Sequence[int], 
              f"Command: `{command}`  ",
              f"Fitted on `{run_dir}` ({run.config.strategy}, seed {run.config.seed}, {len(run.config.tasks)} tasks, "
              f"budget {run.config.step_budget:,} steps, S-bar {run.config.eval_episodes}; {len(run.entries)} calls "
-             f"in {len(segments)} segments; measured wall-clock {run.wall_seconds:.1f} s, first state to last).", "",
+             f"in {len(segments)} segments; measured wall-clock {run.wall_seconds:.1f} s, first state to last; "
+             f"launched as {recorded_run_settings(run_dir)}, e.g. by `glocal-ros experiment --strategies "
+             f"{run.config.strategy} --seeds {run.config.seed} --preset PRESET [--budget STEPS] --out DIR`).", "",
              "## The model (non-negative least squares over the run's calls)", "", "| term | value |", "|---|---|",
              *_model_rows(model), "",
              f"Fit error on the run's own calls: median {100 * errors[len(errors) // 2]:.0f}%, worst "
