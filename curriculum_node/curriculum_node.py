@@ -18,8 +18,13 @@ Several pairs: ``learner_namespaces`` (comma-separated, e.g.
 the learners, one ``RosLearner`` each. With ``parallel_locals`` GloCAL sends
 its local tasks to whichever is free (``glocal_ros.curriculum.glocal``); the
 journal is then keyed by call and says which learner (its index in
-``learner_namespaces``) answered each; a call whose learner left and did not
-come back within ``learner_timeout_sec`` goes to the next free one. Without
+``learner_namespaces``) answered each; a call whose learner left the graph
+and was not back within ``learner_away_sec`` goes to the next free one (a
+Train goal resumes there from its checkpoint in the shared policy store),
+and that learner gets calls again once it is back. Such a run starts (and
+resumes) once every learner runs no goal: the goals a killed curriculum
+node left running end first, and the same goals sent again get their
+outcome instead of running a second time on another learner. Without
 ``parallel_locals`` the run is sequential and uses the first learner only.
 """
 
@@ -76,8 +81,13 @@ class CurriculumNode(Node):
         self.assignment_pub = self.create_publisher(TaskAssignment, names.TASK_ASSIGNMENT, qos.LATCHED)
         namespaces = declare(self, "learner_namespaces", "", "the learners, comma-separated namespaces "
                              "(e.g. pair0,pair1; / for the root); '' for this node's own")
+        away = declare(self, "learner_away_sec", 30.0, "parallel_locals over several learners: how long one "
+                       "may be out of the graph (noticed some 20 s after a kill) before its call goes to another",
+                       min_value=0.0, max_value=86_400.0)
         self.learner_namespaces = learner_namespace_list(namespaces)
-        self.learners = [RosLearner(self, self.learner_timeout, namespace=namespace)
+        pooled = self.config.parallel_locals and len(self.learner_namespaces) > 1
+        self.learners = [RosLearner(self, self.learner_timeout, namespace=namespace,
+                                    away_sec=away if pooled else None)
                          for namespace in self.learner_namespaces]
         self.learner = self.learners[0]
         journal_path = self.state_dir / "journal.jsonl"
@@ -134,7 +144,10 @@ class CurriculumNode(Node):
     def run(self) -> None:
         try:
             for learner in self.learners:
-                learner.wait_for_learner()
+                if self.config.parallel_locals:
+                    learner.wait_until_ready()
+                else:
+                    learner.wait_for_learner()
             if self.config.parallel_locals:
                 run = Run(self.config, self.learner, self, learners=self.learners, journal=self.journal,
                           resend_on=(ServiceCallError,))

@@ -127,6 +127,10 @@ class LearnerNode(Node):
             self, Train, names.LEARNER_TRAIN, self.execute_train, goal_callback=self.on_train_goal,
             cancel_callback=lambda goal: CancelResponse.ACCEPT, callback_group=ReentrantCallbackGroup(),
         )
+        # The goal status (transient-local) is published at every goal's change; published now too, so that
+        # a client always finds one and reads from it whether this learner runs a goal (a curriculum node
+        # started again waits for the goals its killed predecessor sent: curriculum_node.ros_learner).
+        self.train_server._handle.publish_status()  # rclpy has no public call for it
         self.get_logger().info(f"policies: {', '.join(self.policies.names())}")
 
     @answers_errors("evaluate")

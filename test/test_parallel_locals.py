@@ -179,3 +179,43 @@ def test_a_call_that_fails_on_every_send_ends_the_run(tmp_path):
     from glocal_ros.curriculum.run import MAX_SENDS
 
     assert len(leaving.failed) == MAX_SENDS
+
+
+class AwayAfterLeaving(LeavesMidGoal):
+    """A leaving pair that can be watched (``ReturningLearner``): not back for its first ``away_watches``."""
+
+    def __init__(self, learner, fails, away_watches):
+        super().__init__(learner, fails)
+        self.away_watches, self.watches = away_watches, 0
+
+    def wait_until_ready(self):
+        self.watches += 1
+        if self.watches <= self.away_watches:
+            raise Gone("not back yet")
+
+
+def test_a_pair_that_left_gets_no_call_until_it_is_back(tmp_path):
+    store = SimulatedLearner(seed=1, lockstep_envs=2)
+    leaving = AwayAfterLeaving(store, fails=1, away_watches=2)
+    path = tmp_path / "journal.jsonl"
+    calls = SteppedCalls(LAST_STARTED_FIRST)
+    the_run = Run(config("glocal", parallel_locals=True, **SHORT), store, Recorder(), learners=[store, leaving],
+                  journal=CallJournal(path, {}), calls=calls, resend_on=(Gone,))
+    run_strategy(the_run)
+    assert the_run.state.status == STATUS_FINISHED and leaving.failed and leaving.watches == 3
+    on_the_leaving_pair = [key for slot, key in calls.started if slot == 1]
+    failed = next(i for i, key in enumerate(on_the_leaving_pair) if key.startswith("m") and "/local/" in key)
+    assert on_the_leaving_pair[failed + 1:failed + 4] == ["watch learner 1"] * 3, "watched until back, nothing sent"
+    assert any(key.startswith("m") for key in on_the_leaving_pair[failed + 4:]), "back in the pool"
+    keys = _keys(path)
+    assert len(keys) == len(set(keys)), "every call answered once"
+
+
+def test_a_pool_whose_every_learner_is_away_ends_the_run(tmp_path):
+    store = SimulatedLearner(seed=1, lockstep_envs=2)
+    leaving = AwayAfterLeaving(store, fails=1, away_watches=10**6)
+    the_run = Run(config("glocal", parallel_locals=True, **SHORT), store, Recorder(), learners=[leaving],
+                  journal=CallJournal(tmp_path / "journal.jsonl", {}), calls=SteppedCalls(), resend_on=(Gone,))
+    with pytest.raises(Gone, match="not back yet"):
+        run_strategy(the_run)
+    assert leaving.watches == 1

@@ -3,7 +3,7 @@
 from __future__ import annotations
 
 from dataclasses import dataclass
-from typing import Protocol, Sequence
+from typing import Protocol, Sequence, runtime_checkable
 
 #: S-bar: evaluation episodes of a score, the paper's 100.
 PAPER_EVAL_EPISODES = 100
@@ -66,3 +66,11 @@ class Learner(Protocol):
 
     def copy(self, source: str, destination: str) -> None:
         """Store a copy of policy ``source`` as ``destination``."""
+
+
+@runtime_checkable
+class ReturningLearner(Learner, Protocol):
+    """A learner of a pool that can go away and come back (a killed pair, restarted)."""
+
+    def wait_until_ready(self) -> None:
+        """Block until the learner is back and takes calls; raise when it did not come back in time."""

@@ -34,8 +34,12 @@ learners until the journal is spent), then sends the calls still
 outstanding, the ones in flight at the kill among them, in any order.
 A call whose learner went away (``resend_on``: a killed pair that did not
 come back in time) goes back to the front of the queue, to the next free
-learner, the same one when it is back (a Train goal resumes from its
-checkpoint in the shared policy store), up to ``MAX_SENDS`` sends in all.
+learner (a Train goal resumes from its checkpoint in the shared policy
+store), up to ``MAX_SENDS`` sends in all. The learner that failed it gets no
+call until it is ready again: a ``ReturningLearner`` is watched
+(``wait_until_ready``, in its slot, so that the slot is taken meanwhile);
+a watch that ends without the learner back starts again while another
+learner is up, and ends the run when every learner is away.
 The budget counts the steps reserved by goals in flight: a new goal is
 clipped to what is left after them, and a goal hands back what it did not use
 when it ends.
@@ -56,13 +60,15 @@ from glocal_ros.curriculum.codes import (
     STATUS_TRAINING, STATUS_TRAINING_GLOBAL, STATUS_TRAINING_LOCAL, BASELINE_TASKS,
 )
 from glocal_ros.curriculum.journal import CallJournal, JournalMismatch, plain, train_result
-from glocal_ros.curriculum.learner import (PAPER_EVAL_EPISODES, Learner, TrainRequest, TrainResult,
-                                           paper_threshold)
+from glocal_ros.curriculum.learner import (PAPER_EVAL_EPISODES, Learner, ReturningLearner, TrainRequest,
+                                           TrainResult, paper_threshold)
 from glocal_ros.seeds import derived_seed
 from glocal_ros.tasks import sorted_tasks, validate_tasks
 
 #: Most times an outstanding call is sent to a learner before its failure ends the run.
 MAX_SENDS = 3
+#: The key a slot's watch runs under (never a call's: call keys have no spaces).
+_WATCH_KEY = "watch learner {slot}"
 
 _STATUS_OF_ROLE = {ROLE_GLOBAL: STATUS_TRAINING_GLOBAL, ROLE_LOCAL: STATUS_TRAINING_LOCAL,
                    ROLE_SAMPLED: STATUS_TRAINING, ROLE_CLUSTER: STATUS_TRAINING}
@@ -236,7 +242,8 @@ class Run:
         self.calls = calls or ThreadedCalls()
         self._outstanding: dict[str, _Call] = {}  # by key: queued or running, not answered
         self._queued: deque[str] = deque()
-        self._running: dict[int, str] = {}  # learner slot -> key
+        self._running: dict[int, str] = {}  # learner slot -> key (a call's, or its watch's)
+        self._watched: set[int] = set()  # slots whose learner failed a call and is not back yet
         self.resend_on = resend_on
         self._sends: dict[str, int] = {}  # key -> times sent to a learner
         self.observer = observer or _NoObserver()
@@ -384,8 +391,12 @@ class Run:
             self._dispatch()
             slot, key, answer = self.calls.next_done()
             del self._running[slot]
+            if slot in self._watched:
+                self._watch_ended(slot, answer)
+                return
             if isinstance(answer, self.resend_on) and self._sends[key] < MAX_SENDS:
                 self._queued.appendleft(key)  # a Train goal sent again resumes from its checkpoint
+                self._watch(slot)
                 self._dispatch()
                 return
             if isinstance(answer, BaseException):
@@ -395,6 +406,24 @@ class Run:
                 self.journal.record(key, slot, call.name, call.arguments, answer, call.cost(answer))
         del self._outstanding[call.key]
         call.done(answer)
+        self._dispatch()
+
+    def _watch(self, slot: int) -> None:
+        """Take ``slot`` until its learner is ready again (see the module doc)."""
+        learner = self.learners[slot]
+        if not isinstance(learner, ReturningLearner):
+            return
+        self._watched.add(slot)
+        self._running[slot] = _WATCH_KEY.format(slot=slot)
+        self.calls.start(slot, learner, self._running[slot], lambda learner: learner.wait_until_ready())
+
+    def _watch_ended(self, slot: int, outcome: Any) -> None:
+        """The slot is free when its learner is back; watched again while another is up; else the run ends."""
+        self._watched.discard(slot)
+        if isinstance(outcome, BaseException):
+            if len(self._watched) + 1 == len(self.learners):
+                raise outcome
+            self._watch(slot)
         self._dispatch()
 
     def mark_learned(self, task: str, policy: str) -> None:
