@@ -62,12 +62,13 @@ class _NoAnswer(Exception):
 class RosLearner:
     def __init__(self, node: Node, timeout_sec: float,
                  on_feedback: Callable[[Train.Feedback], None] = lambda feedback: None, namespace: str = ""):
-        """``namespace``: the learner's (e.g. ``/pair1``); "" for the node's own."""
+        """``namespace``: the learner's (e.g. ``/pair1``, ``/`` the root, ``pair1`` under the node's); "" for the
+        node's own."""
         group = ReentrantCallbackGroup()
         self.node = node
         self.timeout_sec = timeout_sec
         self.on_feedback = on_feedback
-        prefix = f"/{namespace.strip('/')}/" if namespace.strip("/") else ""
+        prefix = namespace.rstrip("/") + "/" if namespace else ""
         self._evaluate = node.create_client(Evaluate, prefix + names.LEARNER_EVALUATE, callback_group=group)
         self._copy = node.create_client(CopyPolicy, prefix + names.LEARNER_COPY_POLICY, callback_group=group)
         self._train = ActionClient(node, Train, prefix + names.LEARNER_TRAIN, callback_group=group)
