@@ -15,7 +15,10 @@ parameters and ``state_dir`` goes on where the last one stopped;
 
 Several pairs: ``learner_namespaces`` (comma-separated, e.g.
 ``pair0,pair1``; default "", the learner in this node's own namespace) names
-the learners, one ``RosLearner`` each. With ``parallel_locals`` GloCAL sends
+the learners, one ``RosLearner`` each. Relative names resolve under this
+node's namespace, as every ROS name does (``pair1`` of a node in ``/robot1``
+is ``/robot1/pair1``; ``/`` is the root), so that a launch file's
+``PushRosNamespace`` moves the curriculum and its pairs together. With ``parallel_locals`` GloCAL sends
 its local tasks to whichever is free (``glocal_ros.curriculum.glocal``); the
 journal is then keyed by call and says which learner (its index in
 ``learner_namespaces``) answered each; a call whose learner left the graph
@@ -84,7 +87,7 @@ class CurriculumNode(Node):
         away = declare(self, "learner_away_sec", 30.0, "parallel_locals over several learners: how long one "
                        "may be out of the graph (noticed some 20 s after a kill) before its call goes to another",
                        min_value=0.0, max_value=86_400.0)
-        self.learner_namespaces = learner_namespace_list(namespaces)
+        self.learner_namespaces = learner_namespace_list(namespaces, self.get_namespace())
         pooled = self.config.parallel_locals and len(self.learner_namespaces) > 1
         self.learners = [RosLearner(self, self.learner_timeout, namespace=namespace,
                                     away_sec=away if pooled else None)
@@ -229,9 +232,20 @@ def state_message(state: RunState, stamp) -> CurriculumState:
     return message
 
 
-def learner_namespace_list(text: str) -> list[str]:
-    """``learner_namespaces`` as a list ("" alone for the node's own namespace); repeats refused."""
-    namespaces = ["/" + part.strip().strip("/") if part.strip().strip("/") else "" for part in text.split(",")]
+def learner_namespace_list(text: str, node_namespace: str = "/") -> list[str]:
+    """``learner_namespaces`` as absolute namespaces: a relative one under ``node_namespace`` (the node's), an
+    absolute one as it is, ``/`` for the root; "" alone (the default) is ``[""]``, the node's own names as they
+    are. Repeats refused."""
+    if not text.strip():
+        return [""]
+    base = node_namespace.rstrip("/")
+    namespaces = []
+    for part in text.split(","):
+        name = part.strip()
+        if name.startswith("/"):
+            namespaces.append("/" + name.strip("/"))
+        else:
+            namespaces.append(f"{base}/{name.strip('/')}" if name.strip("/") else base or "/")
     if len(set(namespaces)) != len(namespaces):
         raise ValueError(f"learner_namespaces repeat: {text!r}")
     return namespaces

@@ -76,15 +76,16 @@ class RosLearner:
     def __init__(self, node: Node, timeout_sec: float,
                  on_feedback: Callable[[Train.Feedback], None] = lambda feedback: None, namespace: str = "",
                  away_sec: float | None = None):
-        """``namespace``: the learner's (e.g. ``/pair1``); "" for the node's own. ``away_sec``: how long the
-        learner may be out of the graph before a call on it fails (default ``timeout_sec``)."""
+        """``namespace``: the learner's (e.g. ``/pair1``, ``/`` the root, ``pair1`` under the node's); "" for the
+        node's own. ``away_sec``: how long the learner may be out of the graph before a call on it fails
+        (default ``timeout_sec``)."""
         group = ReentrantCallbackGroup()
         self.node = node
         self.timeout_sec = timeout_sec
         self.away_sec = timeout_sec if away_sec is None else away_sec
         self.namespace = namespace
         self.on_feedback = on_feedback
-        prefix = f"/{namespace.strip('/')}/" if namespace.strip("/") else ""
+        prefix = namespace.rstrip("/") + "/" if namespace else ""
         self._evaluate = node.create_client(Evaluate, prefix + names.LEARNER_EVALUATE, callback_group=group)
         self._copy = node.create_client(CopyPolicy, prefix + names.LEARNER_COPY_POLICY, callback_group=group)
         self.train_name = prefix + names.LEARNER_TRAIN

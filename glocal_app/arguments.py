@@ -95,6 +95,25 @@ def add_graph_arguments(parser: argparse.ArgumentParser) -> None:
     add_profile_argument(parser, default=None)
 
 
+def add_pairs_arguments(parser: argparse.ArgumentParser) -> None:
+    """``--pairs`` and ``--force``, checked by ``check_pairs_arguments`` (set as the command's ``check``)."""
+    parser.add_argument("--pairs", type=int, default=1, metavar="K",
+                        help="sim/learner pairs, each in its namespace pair0..pairK-1 under the run's, training "
+                             "GloCAL's local tasks at once (parallel_locals); default 1: one pair, no pair "
+                             "namespace, the sequential run")
+    parser.add_argument("--force", action="store_true",
+                        help="start more pairs than this machine has cores")
+
+
+def check_pairs_arguments(args: argparse.Namespace) -> None:
+    """``ValueError`` for pairs that ``processes.check_pairs`` refuses with any of the command's strategies."""
+    from glocal_app.processes import check_pairs
+
+    strategies = args.strategies if hasattr(args, "strategies") else [args.strategy]
+    for strategy in strategies:
+        check_pairs(args.pairs, strategy, args.force, args.use_sim_time)
+
+
 def add_profile_argument(parser: argparse.ArgumentParser, default: str | None = DEFAULT_PROFILE) -> None:
     """``--profile``: the learner profile; a default of None leaves it to the preset."""
     parser.add_argument("--profile", default=default, choices=list(PROFILES),

@@ -28,6 +28,8 @@ from glocal_app.arguments import (
     EXIT_USAGE,
     add_experiment_arguments,
     add_graph_arguments,
+    add_pairs_arguments,
+    check_pairs_arguments,
     positive_float,
 )
 from glocal_app.assets_cli import add_assets_commands
@@ -86,7 +88,7 @@ def cmd_launch(args: argparse.Namespace) -> int:
     foxglove = None if args.foxglove is None else FoxgloveEndpoint(
         args.foxglove, *(() if args.foxglove_host is None else (args.foxglove_host,)))
     graph = dict(namespace=args.namespace, use_sim_time=args.use_sim_time, learner_profile=args.profile,
-                 foxglove=foxglove)
+                 foxglove=foxglove, pairs=args.pairs)
     if args.watchdog is None:
         return launch(args.strategy, args.preset, args.seed, args.out, **graph)
     return launch(args.strategy, args.preset, args.seed, args.out, watchdog_sec=args.watchdog, **graph)
@@ -97,7 +99,7 @@ def cmd_experiment(args: argparse.Namespace) -> int:
 
     return experiment(args.strategies, args.seeds, args.preset, args.out, namespace=args.namespace,
                       use_sim_time=args.use_sim_time, step_budget=args.budget, learner_profile=args.profile,
-                      ray_address=args.ray, ray_cpus_per_run=args.ray_cpus_per_run)
+                      ray_address=args.ray, ray_cpus_per_run=args.ray_cpus_per_run, pairs=args.pairs)
 
 
 def add_graph_commands(commands) -> None:
@@ -134,14 +136,16 @@ def add_graph_commands(commands) -> None:
     launch.add_argument("--foxglove-host", default=None, metavar="HOST",
                         help=f"serve Foxglove on HOST instead of {FOXGLOVE_HOST} (this host only); e.g. 0.0.0.0 "
                              f"lets every host that reaches the port see the graph, with no authentication")
-    launch.set_defaults(func=cmd_launch)
+    add_pairs_arguments(launch)
+    launch.set_defaults(func=cmd_launch, check=check_pairs_arguments)
 
     experiment = commands.add_parser("experiment", help="strategies x seeds as separate runs (resumable), "
                                      "then one report")
     add_experiment_arguments(experiment, preset="smoke")
     experiment.add_argument("--out", type=Path, required=True, help="gets <strategy>-seed<N>/ per run and report/")
     add_graph_arguments(experiment)
-    experiment.set_defaults(func=cmd_experiment)
+    add_pairs_arguments(experiment)
+    experiment.set_defaults(func=cmd_experiment, check=check_pairs_arguments)
 
 
 def build_parser() -> argparse.ArgumentParser:

@@ -22,6 +22,12 @@ several graphs can share a domain; ``--use-sim-time`` gives sim_node and
 recorder_node ``use_sim_time`` (the sim's /clock), while the learner's and the
 curriculum's timeouts stay wall-clock.
 
+Pairs (``--pairs K``, K >= 2): K sims and K learners, pair i in
+``<namespace>/pair<i>``, as ``processes.run_parameters`` plans them; the
+launch waits until the recorder listens to every pair's episodes, and the
+progress bar and the watchdog hear every pair (a stall names the pairs whose
+learner no longer answers).
+
 A watchdog stops a hung run instead of letting it wait: when a node process
 ends before the curriculum does, or nothing moves for ``watchdog_sec``
 (no episode, no training progress, no curriculum state: a running graph
@@ -52,10 +58,10 @@ from glocal_interfaces.srv import ListPolicies
 from rclpy.signals import SignalHandlerOptions
 
 from glocal_app.arguments import EXIT_FAILED, EXIT_INTERRUPTED, EXIT_STALLED
-from glocal_app.processes import (FOXGLOVE_NODE, FoxgloveEndpoint, NodeProcess, check_foxglove_endpoint, check_run_dir,
+from glocal_app.processes import (FoxgloveEndpoint, NodeProcess, check_foxglove_endpoint, check_pairs, check_run_dir,
                                    claim_run_dir, isolated_environment, namespace_arguments, new_bag_path,
-                                   normalize_namespace, preset_file, preset_parameters, run_parameters, run_settings,
-                                   STATE_FILE)
+                                   normalize_namespace, pair_namespaces, preset_file, preset_parameters,
+                                   run_nodes, run_parameters, run_settings, split_node_path, STATE_FILE)
 from glocal_ros.curriculum.codes import STRATEGY_NAMES
 from glocal_ros.domain import choose_domain_id
 from glocal_ros.recording import message_counts
@@ -143,18 +149,20 @@ class Progress:
         self.bar = tqdm(total=0, unit="step", desc="training", dynamic_ncols=True)
         self.state: CurriculumState | None = None
         self.progress: TrainingProgress | None = None
-        self.goal_steps = 0
+        self.goal_steps: dict[str, int] = {}  # of the goal each pair reported last, by pair
         self.shown_iteration = None
 
     def on_state(self, state: CurriculumState) -> None:
         if state.iteration != self.shown_iteration and state.clusters:
             self.shown_iteration = state.iteration
             self.bar.write(describe(state))
-        self.state, self.goal_steps = state, 0
+        self.state = state
+        self.goal_steps.clear()
         self._draw()
 
-    def on_progress(self, progress: TrainingProgress) -> None:
-        self.progress, self.goal_steps = progress, progress.goal_steps
+    def on_progress(self, progress: TrainingProgress, pair: str = "") -> None:
+        self.progress = progress
+        self.goal_steps[pair] = progress.goal_steps
         self._draw()
 
     def _draw(self) -> None:
@@ -162,7 +170,7 @@ class Progress:
         if state is None:
             return
         self.bar.total = state.step_budget
-        self.bar.n = min(state.total_steps + self.goal_steps, state.step_budget)
+        self.bar.n = min(state.total_steps + sum(self.goal_steps.values()), state.step_budget)
         total = len(state.learned_tasks) + len(state.remaining_tasks)
         self.bar.set_postfix_str(f"learned {len(state.learned_tasks)}/{total}, iteration {state.iteration}, "
                                  f"{STATUS_NAMES.get(state.status, state.status)} {state.current_task}".rstrip(),
@@ -174,9 +182,15 @@ class Progress:
             print(describe(self.state))
 
 
-def learner_answers(node, timeout_sec: float = LEARNER_PROBE_SEC) -> bool:
-    """Whether learner_node answers learner/list_policies (served beside a running goal) in time."""
-    client = node.create_client(ListPolicies, names.LEARNER_LIST_POLICIES)
+def pair_name(pair: str, name: str) -> str:
+    """``name`` under a pair's namespace (relative to the run's), as the launcher's node resolves it."""
+    return f"{pair}/{name}" if pair else name
+
+
+def learner_answers(node, timeout_sec: float = LEARNER_PROBE_SEC, pair: str = "") -> bool:
+    """Whether the learner_node of ``pair`` ("" the run's own) answers learner/list_policies (served beside a
+    running goal) in time."""
+    client = node.create_client(ListPolicies, pair_name(pair, names.LEARNER_LIST_POLICIES))
     try:
         future = client.call_async(ListPolicies.Request())
         rclpy.spin_until_future_complete(node, future, timeout_sec=timeout_sec)
@@ -186,32 +200,39 @@ def learner_answers(node, timeout_sec: float = LEARNER_PROBE_SEC) -> bool:
 
 
 def check_graph(node, watchdog: Watchdog, progress: Progress, started: Sequence[NodeProcess],
-                curriculum: NodeProcess) -> None:
-    """Raise ``GraphStalled`` when a node other than the curriculum ended, or the run stopped moving."""
+                curriculum: NodeProcess, pairs: Sequence[str] = ("",)) -> None:
+    """Raise ``GraphStalled`` when a node other than the curriculum ended, or the run stopped moving.
+
+    ``pairs``: the pairs' namespaces (``processes.pair_namespaces``); a stall says whose learner answers.
+    """
     for process in started:
         if process is not curriculum and not process.running:
-            raise GraphStalled(f"{process.node} ended (exit code {process.process.returncode}) while the run "
+            raise GraphStalled(f"{process.name} ended (exit code {process.process.returncode}) while the run "
                                f"went on: see {process.log_path}")
     if watchdog.stalled():
         text = watchdog.describe_silence(progress.state, progress.progress)
-        answers = learner_answers(node)
-        text += "; learner_node answers requests" if answers else "; learner_node does not answer requests"
+        for pair in pairs:
+            learner = pair_name(pair, "learner_node")
+            answers = learner_answers(node, pair=pair)
+            text += f"; {learner} answers requests" if answers else f"; {learner} does not answer requests"
         raise GraphStalled(text)
 
 
 def launch(strategy: str, preset: str, seed: int, run_dir: Path, startup_timeout: float = 120.0,
            report: bool = True, watchdog_sec: float = DEFAULT_WATCHDOG_SEC, namespace: str = "",
            use_sim_time: bool = False, step_budget: int | None = None, learner_profile: str | None = None,
-           foxglove: FoxgloveEndpoint | None = None) -> int:
+           foxglove: FoxgloveEndpoint | None = None, pairs: int = 1) -> int:
     """Run (or resume) one run in ``run_dir``; the curriculum's exit code, ``EXIT_INTERRUPTED`` on Ctrl-C or
     ``EXIT_STALLED``.
 
     ``step_budget`` replaces the preset's training-step budget, ``learner_profile`` its learner
-    profile; ``foxglove`` starts foxglove_bridge_node there, before the other nodes. Bad input (an
-    unknown preset or profile, a budget below one evaluation interval, an invalid namespace or
-    ROS_DOMAIN_ID, another run's directory, a Foxglove port that is taken or invalid) raises
-    ``ValueError`` before anything starts.
+    profile; ``foxglove`` starts foxglove_bridge_node there, before the other nodes; ``pairs`` sim/learner
+    pairs train GloCAL's local tasks at once. Bad input (an unknown preset or profile, a budget below one
+    evaluation interval, an invalid namespace or ROS_DOMAIN_ID, another run's directory, a Foxglove port
+    that is taken or invalid, pairs that ``check_pairs`` refuses but for the machine's cores, which the
+    command line checks) raises ``ValueError`` before anything starts.
     """
+    check_pairs(pairs, strategy, force=True, use_sim_time=use_sim_time)
     params_file = preset_file(preset)
     check_episode_steps(preset)
     check_step_budget(preset, step_budget)
@@ -221,7 +242,7 @@ def launch(strategy: str, preset: str, seed: int, run_dir: Path, startup_timeout
         check_foxglove_endpoint(foxglove)
     domain = choose_domain_id()
     try:
-        resumed = claim_run_dir(run_dir, run_settings(strategy, preset, seed, step_budget, learner_profile))
+        resumed = claim_run_dir(run_dir, run_settings(strategy, preset, seed, step_budget, learner_profile, pairs))
     except ValueError:
         domain.close()
         raise
@@ -229,33 +250,37 @@ def launch(strategy: str, preset: str, seed: int, run_dir: Path, startup_timeout
     bag = new_bag_path(run_dir)
     env = isolated_environment(domain.domain_id, logs, keep_discovery_range=domain.from_environment)
     where = f", namespace {namespace}" if namespace else ""
+    where += f", {pairs} sim/learner pairs" if pairs > 1 else ""
     print(f"{'resuming' if resumed else 'launching'} preset {preset}, strategy {strategy}, seed {seed}{where} "
           f"on {domain.describe()}; logs in {logs}", flush=True)
 
     node = launcher_node(domain.domain_id, namespace)
     progress = Progress()
     watchdog = Watchdog(watchdog_sec, startup_timeout)
-    listen_for_progress(node, progress, watchdog)
+    pairs_here = pair_namespaces(pairs)
+    listen_for_progress(node, progress, watchdog, pairs_here)
     started: list[NodeProcess] = []
-    plan = run_parameters(strategy, seed, run_dir, bag, use_sim_time, step_budget, learner_profile, foxglove)
+    plan = run_parameters(strategy, seed, run_dir, bag, use_sim_time, step_budget, learner_profile, foxglove, pairs)
 
-    def start(name: str) -> NodeProcess:
-        process = NodeProcess(name, logs, plan[name], params_file, env, extra_args=namespace_arguments(namespace))
+    def start(path: str) -> NodeProcess:
+        pair, executable = split_node_path(path)
+        where = normalize_namespace(f"{namespace}/{pair}")
+        process = NodeProcess(executable, logs, plan[path], params_file, env, extra_args=namespace_arguments(where),
+                              name=path)
         started.append(process)
         return process
 
     exit_code = EXIT_FAILED
     try:
+        *graph, last = run_nodes(foxglove, pairs)
+        for path in graph:
+            start(path)
         if foxglove is not None:
-            start(FOXGLOVE_NODE)
             print(f"Foxglove: open a connection to {foxglove.url} (layout: assets/foxglove/glocal.json)", flush=True)
-        start("recorder_node")
-        start("sim_node")
-        start("learner_node")
-        wait_for_recorder(node, started, startup_timeout)
-        curriculum = start("curriculum_node")
+        wait_for_recorder(node, started, startup_timeout, pairs_here)
+        curriculum = start(last)
         watchdog.started = time.monotonic()
-        exit_code = follow_curriculum(node, watchdog, progress, started, curriculum)
+        exit_code = follow_curriculum(node, watchdog, progress, started, curriculum, pairs_here)
     except KeyboardInterrupt:
         progress.close()
         print("interrupted: stopping the graph; the same command resumes the run")
@@ -294,39 +319,46 @@ def launcher_node(domain_id: int, namespace: str):
     return rclpy.create_node("glocal_ros_launch", namespace=namespace or None)
 
 
-def listen_for_progress(node, progress: Progress, watchdog: Watchdog) -> None:
-    """What the progress bar shows and the watchdog hears: curriculum states, training progress, episodes."""
+def listen_for_progress(node, progress: Progress, watchdog: Watchdog, pairs: Sequence[str] = ("",)) -> None:
+    """What the progress bar shows and the watchdog hears: curriculum states, and each pair's training progress
+    and episodes (``pairs``: their namespaces, ``processes.pair_namespaces``)."""
     def heard(what: str, handle=lambda message: None):
         return lambda message: (watchdog.heard(what), handle(message))
 
     node.create_subscription(CurriculumState, names.CURRICULUM_STATE, heard(CURRICULUM_HEARD, progress.on_state),
                              qos.LATCHED)
-    node.create_subscription(TrainingProgress, names.TRAINING_PROGRESS, heard("training progress",
-                                                                              progress.on_progress), qos.EVENTS)
-    # Raw: the watchdog only needs to know that an episode came, not what it holds.
-    node.create_subscription(EpisodeRecord, names.EPISODES, heard("an episode"), qos.EPISODES, raw=True)
+    for pair in pairs:
+        source = f"{pair}: " if pair else ""
+        node.create_subscription(
+            TrainingProgress, pair_name(pair, names.TRAINING_PROGRESS),
+            heard(f"{source}training progress", lambda message, pair=pair: progress.on_progress(message, pair)),
+            qos.EVENTS)
+        # Raw: the watchdog only needs to know that an episode came, not what it holds.
+        node.create_subscription(EpisodeRecord, pair_name(pair, names.EPISODES), heard(f"{source}an episode"),
+                                 qos.EPISODES, raw=True)
 
 
-def wait_for_recorder(node, started: Sequence[NodeProcess], timeout: float) -> None:
-    """Until the recorder listens to the sim's episode stream, so that the bag holds every episode from seq 0.
+def wait_for_recorder(node, started: Sequence[NodeProcess], timeout: float, pairs: Sequence[str] = ("",)) -> None:
+    """Until the recorder listens to every pair's episode stream, so that the bag holds every episode from seq 0.
 
     ``RuntimeError`` naming the node and its log when a started node ends, or after ``timeout`` seconds.
     """
     deadline = time.monotonic() + timeout
-    while node.count_subscribers(names.EPISODES) < 1 or node.count_publishers(names.EPISODES) < 1:
+    topics = [pair_name(pair, names.EPISODES) for pair in pairs]
+    while any(node.count_subscribers(topic) < 1 or node.count_publishers(topic) < 1 for topic in topics):
         rclpy.spin_once(node, timeout_sec=0.1)
         failed = [p for p in started if not p.running]
         if failed or time.monotonic() > deadline:
             culprit = (failed or started)[0]
-            raise RuntimeError(f"{culprit.node} did not start: see {culprit.log_path}")
+            raise RuntimeError(f"{culprit.name} did not start: see {culprit.log_path}")
 
 
 def follow_curriculum(node, watchdog: Watchdog, progress: Progress, started: Sequence[NodeProcess],
-                      curriculum: NodeProcess) -> int:
+                      curriculum: NodeProcess, pairs: Sequence[str] = ("",)) -> int:
     """Show the run's progress until the curriculum node ends; its exit code. ``GraphStalled`` from the watchdog."""
     while curriculum.running:
         rclpy.spin_once(node, timeout_sec=0.2)
-        check_graph(node, watchdog, progress, started, curriculum)
+        check_graph(node, watchdog, progress, started, curriculum, pairs)
     for _ in range(5):  # the last state may still be on its way
         rclpy.spin_once(node, timeout_sec=0.1)
     progress.close()
@@ -346,7 +378,7 @@ def stop_graph(started: Sequence[NodeProcess]) -> int:
     for process in reversed(started):
         code = process.stop(signal.SIGINT)
         if code not in (0, None) and process.node != "curriculum_node":
-            print(f"{process.node} exited with {code}: see {process.log_path}")
+            print(f"{process.name} exited with {code}: see {process.log_path}")
             first_failure = first_failure or code
     return first_failure
 
@@ -419,12 +451,14 @@ def experiment_runs(strategies: Sequence[str], seeds: Sequence[int], out: Path) 
 
 
 def check_experiment(strategies: Sequence[str], seeds: Sequence[int], preset: str, out: Path,
-                     step_budget: int | None = None, namespace: str = "", learner_profile: str | None = None) -> None:
+                     step_budget: int | None = None, namespace: str = "", learner_profile: str | None = None,
+                     pairs: int = 1, use_sim_time: bool = False) -> None:
     """Everything ``experiment`` refuses, checked before its first node starts; ``ValueError`` says what.
 
     Strategies must be known and not repeat, seeds non-negative and not repeat, the preset must
-    exist, the budget cover one evaluation, and no run directory may hold a run of other settings
-    (another preset or budget): its runs would be mixed into this experiment's report.
+    exist, the budget cover one evaluation, every strategy train on ``pairs`` pairs (``check_pairs``;
+    the machine's cores are the command line's to check), and no run directory may hold a run of other
+    settings (another preset, budget or number of pairs): its runs would be mixed into this experiment's report.
     """
     unknown = [s for s in strategies if s not in STRATEGY_NAMES]
     if unknown or not strategies:
@@ -438,8 +472,10 @@ def check_experiment(strategies: Sequence[str], seeds: Sequence[int], preset: st
     check_step_budget(preset, step_budget)
     check_learner_profile(learner_profile)
     normalize_namespace(namespace)
+    for strategy in strategies:
+        check_pairs(pairs, strategy, force=True, use_sim_time=use_sim_time)
     for strategy, seed, run_dir in experiment_runs(strategies, seeds, out):
-        check_run_dir(run_dir, run_settings(strategy, preset, seed, step_budget, learner_profile))
+        check_run_dir(run_dir, run_settings(strategy, preset, seed, step_budget, learner_profile, pairs))
 
 
 @dataclass(frozen=True)
@@ -455,12 +491,13 @@ class RunOptions:
     use_sim_time: bool = False
     step_budget: int | None = None
     learner_profile: str | None = None
+    pairs: int = 1
 
     def launch_run(self, strategy: str, seed: int, run_dir: Path) -> int:
         """``launch`` one run (or resume it) into ``run_dir``, without its own report; its exit code."""
         return launch(strategy, self.preset, seed, run_dir, report=False, namespace=self.namespace,
                       use_sim_time=self.use_sim_time, step_budget=self.step_budget,
-                      learner_profile=self.learner_profile)
+                      learner_profile=self.learner_profile, pairs=self.pairs)
 
 
 def launch_here(runs: Sequence[PlannedRun], options: RunOptions) -> Iterator[tuple[Path, int]]:
@@ -473,7 +510,7 @@ def experiment(strategies: Sequence[str], seeds: Sequence[int], preset: str, out
                use_sim_time: bool = False, step_budget: int | None = None, report: bool = True,
                learner_profile: str | None = None, finished: Callable[[Path], object] | None = None,
                ray_address: str | None = None, ray_cpus_per_run: int | None = None,
-               prepare: Callable[[], object] | None = None) -> int:
+               prepare: Callable[[], object] | None = None, pairs: int = 1) -> int:
     """Every strategy x seed as its own run under ``out``; finished runs are kept, others (re)launched.
 
     The runs go one after another here, each with ``launch``'s namespace, sim time and domain
@@ -486,8 +523,8 @@ def experiment(strategies: Sequence[str], seeds: Sequence[int], preset: str, out
     come back into ``out`` as they end; the cluster is checked (reachable, a node large enough for
     one run) before any run starts.
     """
-    check_experiment(strategies, seeds, preset, out, step_budget, namespace, learner_profile)
-    options = RunOptions(preset, namespace, use_sim_time, step_budget, learner_profile)
+    check_experiment(strategies, seeds, preset, out, step_budget, namespace, learner_profile, pairs, use_sim_time)
+    options = RunOptions(preset, namespace, use_sim_time, step_budget, learner_profile, pairs)
     runs = experiment_runs(strategies, seeds, out)
     cluster = None
     if ray_address is not None:

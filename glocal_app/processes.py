@@ -9,6 +9,17 @@ parameters from it: the preset's parameter file, the seed, the run directory's
 (``--foxglove [PORT]``, ``foxglove:=true``) also starts foxglove_bridge_node on it
 (``run_nodes``), first, so that a viewer can connect while the others start.
 
+Pairs: a run of K sim/learner pairs (``--pairs K``, ``pairs:=K``) puts each
+pair's sim_node and learner_node in a namespace of its own under the run's,
+``pair0`` .. ``pairK-1`` (``pair_namespaces``), and names them to the
+curriculum (``learner_namespaces``, with ``parallel_locals`` on: K pairs are
+started to train local tasks at once) and to the recorder
+(``pair_namespaces``: one bag holds every pair's topics under its
+namespace). One pair is today's graph exactly, with no pair namespace: its
+nodes, topics and bags stay as they were. Every learner gets the run's one
+policy directory. The plan names each node by its path under the run's
+namespace: ``sim_node``, or ``pair1/sim_node`` (``node_path``).
+
 A process is started as ``glocal-ros run NODE``, logged to a file and stopped
 cleanly.
 
@@ -32,8 +43,15 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Mapping, Sequence
 
-#: The nodes of a run, in the order they start (they stop in the reverse order).
+#: The nodes of a run of one pair, in the order they start (they stop in the reverse order).
 RUN_NODES = ("recorder_node", "sim_node", "learner_node", "curriculum_node")
+#: The nodes of one sim/learner pair, in the order they start.
+PAIR_NODES = ("sim_node", "learner_node")
+#: The strategies that train on several pairs at once (GloCAL's local tasks, ``parallel_locals``): as
+#: ``glocal_ros.curriculum.glocal`` runs them (not imported: see the docstring; a test compares them).
+PARALLEL_STRATEGIES = ("glocal", "glocal_random_cluster")
+#: What the namespace of pair i is called, under the run's (runs of two pairs or more).
+PAIR_NAMESPACE = "pair{}"
 #: The live viewer's bridge, started (first) when the run is given a Foxglove endpoint.
 FOXGLOVE_NODE = "foxglove_bridge_node"
 #: The nodes that follow the sim's /clock when the run asks for sim time: the sim stamps what it
@@ -91,9 +109,31 @@ def check_foxglove_endpoint(endpoint: FoxgloveEndpoint) -> None:
                              f"an address of this host with --foxglove-host (foxglove_host:=)") from None
 
 
-def run_nodes(foxglove: FoxgloveEndpoint | None = None) -> tuple[str, ...]:
-    """The nodes of a run in the order they start: the bridge first when the run has a Foxglove endpoint."""
-    return ((FOXGLOVE_NODE,) if foxglove is not None else ()) + RUN_NODES
+def pair_namespaces(pairs: int = 1) -> tuple[str, ...]:
+    """The pairs' namespaces, relative to the run's: ``("",)`` for one pair (today's graph, no pair namespace),
+    else ``pair0`` .. ``pair<pairs-1>``."""
+    if pairs < 1:
+        raise ValueError(f"a run needs at least one sim/learner pair, got {pairs}")
+    return ("",) if pairs == 1 else tuple(PAIR_NAMESPACE.format(index) for index in range(pairs))
+
+
+def node_path(namespace: str, node: str) -> str:
+    """A node's path under the run's namespace: ``sim_node`` (no pair namespace) or ``pair1/sim_node``."""
+    return f"{namespace}/{node}" if namespace else node
+
+
+def split_node_path(path: str) -> tuple[str, str]:
+    """``(namespace, node)`` of a ``node_path``: ``("pair1", "sim_node")``, ``("", "recorder_node")``."""
+    namespace, _, node = path.rpartition("/")
+    return namespace, node
+
+
+def run_nodes(foxglove: FoxgloveEndpoint | None = None, pairs: int = 1) -> tuple[str, ...]:
+    """The nodes of a run (``node_path``) in the order they start: the bridge first when the run has a Foxglove
+    endpoint, the recorder, each pair's sim and learner, the curriculum last."""
+    bridge = (FOXGLOVE_NODE,) if foxglove is not None else ()
+    pair_nodes = tuple(node_path(namespace, node) for namespace in pair_namespaces(pairs) for node in PAIR_NODES)
+    return bridge + ("recorder_node",) + pair_nodes + ("curriculum_node",)
 
 
 def preset_file(preset: str, params_dir: Path | None = None) -> Path:
@@ -163,14 +203,16 @@ def new_bag_path(run_dir: Path) -> Path:
 
 
 def run_settings(strategy: str, preset: str, seed: int, step_budget: int | None = None,
-                 learner_profile: str | None = None) -> dict[str, object]:
-    """What ``RUN_FILE`` records of a run: its strategy, preset and seed, and a budget and a learner profile that
-    override the preset's."""
+                 learner_profile: str | None = None, pairs: int = 1) -> dict[str, object]:
+    """What ``RUN_FILE`` records of a run: its strategy, preset and seed, a budget and a learner profile that
+    override the preset's, and its pairs when more than one (a run of one pair records what it always did)."""
     settings: dict[str, object] = {"strategy": strategy, "preset": preset, "seed": seed}
     if step_budget is not None:
         settings["step_budget"] = step_budget
     if learner_profile is not None:
         settings["learner_profile"] = learner_profile
+    if pairs != 1:
+        settings["pairs"] = pairs
     return settings
 
 
@@ -212,25 +254,56 @@ def preset_parameters(preset: str, node: str, params_dir: Path | None = None) ->
 
 def run_parameters(strategy: str, seed: int, run_dir: Path, bag: Path, use_sim_time: bool = False,
                    step_budget: int | None = None, learner_profile: str | None = None,
-                   foxglove: FoxgloveEndpoint | None = None) -> dict[str, dict[str, object]]:
-    """What each node of a run gets on top of its preset, keyed by node, in ``run_nodes`` order.
+                   foxglove: FoxgloveEndpoint | None = None, pairs: int = 1) -> dict[str, dict[str, object]]:
+    """What each node of a run gets on top of its preset, keyed by ``node_path``, in ``run_nodes`` order.
 
     ``use_sim_time`` is given to the nodes of ``SIM_TIME_NODES`` only, and only when on: a node
     without it keeps whatever its preset says. ``step_budget`` (training steps of the whole run)
     and ``learner_profile`` replace the preset's when given; ``foxglove`` adds the bridge, serving there.
+    ``pairs`` above one: every pair's sim and learner get the same seed and the one policy directory;
+    the recorder and the curriculum get the pairs' namespaces (relative: they resolve under the run's),
+    and the curriculum ``parallel_locals``.
     """
     budget = {"step_budget": step_budget} if step_budget is not None else {}
     sim_time = {"use_sim_time": True} if use_sim_time else {}
     profile = {"learner_profile": learner_profile} if learner_profile is not None else {}
     bridge = {FOXGLOVE_NODE: {"port": foxglove.port, "address": foxglove.host, **sim_time}} if foxglove else {}
+    namespaces = pair_namespaces(pairs)
+    listed = ",".join(namespaces)
+    pair_nodes: dict[str, dict[str, object]] = {}
+    for namespace in namespaces:
+        pair_nodes[node_path(namespace, "sim_node")] = {"seed": seed, **sim_time}
+        pair_nodes[node_path(namespace, "learner_node")] = {"seed": seed, "policy_dir": str(run_dir / "policies"),
+                                                           **profile}
     return {
         **bridge,
-        "recorder_node": {"output": str(bag), **sim_time},
-        "sim_node": {"seed": seed, **sim_time},
-        "learner_node": {"seed": seed, "policy_dir": str(run_dir / "policies"), **profile},
+        "recorder_node": {"output": str(bag), **sim_time, **({"pair_namespaces": listed} if pairs > 1 else {})},
+        **pair_nodes,
         "curriculum_node": {"strategy": strategy, "seed": seed, "state_dir": str(run_dir / STATE_FILE.parent),
-                            **budget},
+                            **budget,
+                            **({"learner_namespaces": listed, "parallel_locals": True} if pairs > 1 else {})},
     }
+
+
+def check_pairs(pairs: int, strategy: str | None = None, force: bool = False, use_sim_time: bool = False,
+                cpus: int | None = None) -> None:
+    """``ValueError`` unless a run can start ``pairs`` sim/learner pairs here: at least one, no more than this
+    machine's cores (``os.cpu_count()``; each pair is a sim and a learner busy at once) unless ``force``, and
+    several only for a strategy that trains on several at once (``PARALLEL_STRATEGIES``: the others are
+    sequential and would leave every pair but the first idle) and on wall-clock (each pair's sim has a clock
+    of its own: there is no one sim time to record a bag of several pairs on)."""
+    if pairs > 1 and use_sim_time:
+        raise ValueError(f"--pairs {pairs} with --use-sim-time: each pair's sim has a clock of its own, so a run "
+                         f"of several pairs records on wall-clock")
+    if pairs < 1:
+        raise ValueError(f"--pairs {pairs}: a run needs at least one sim/learner pair")
+    cpus = (os.cpu_count() or 1) if cpus is None else cpus
+    if pairs > cpus and not force:
+        raise ValueError(f"--pairs {pairs} is more pairs than this machine has cores ({cpus}); each pair is a sim "
+                         f"and a learner training at once: --force starts them anyway")
+    if pairs > 1 and strategy is not None and strategy not in PARALLEL_STRATEGIES:
+        raise ValueError(f"--pairs {pairs} with strategy {strategy}: only {', '.join(PARALLEL_STRATEGIES)} train "
+                         f"local tasks on several pairs at once (the other strategies are sequential)")
 
 
 def ros_param_text(value) -> str:
@@ -241,7 +314,11 @@ def ros_param_text(value) -> str:
 
 
 class NodeProcess:
-    """One node process. Its output goes to ``<log_dir>/<node>.log``."""
+    """One node process. Its output goes to ``<log_dir>/<name>-<time>.log`` (``pair1-sim_node-...`` for ``pair1/sim_node``).
+
+    ``node`` is the executable; ``name`` what messages call it, its path in the run's plan (``node_path``;
+    default: ``node``).
+    """
 
     def __init__(
         self,
@@ -252,10 +329,13 @@ class NodeProcess:
         env: Mapping[str, str] | None = None,
         extra_args: Sequence[str] = (),
         cwd: Path | None = None,
+        name: str | None = None,
     ):
         self.node = node
+        self.name = name or node
         log_dir.mkdir(parents=True, exist_ok=True)
-        self.log_path = log_dir / f"{node}-{time.strftime('%Y%m%d-%H%M%S')}-{time.monotonic_ns() % 10**6}.log"
+        stem = self.name.replace("/", "-")
+        self.log_path = log_dir / f"{stem}-{time.strftime('%Y%m%d-%H%M%S')}-{time.monotonic_ns() % 10**6}.log"
         command = [sys.executable, "-m", "glocal_app.cli", "run", node, "--ros-args"]
         if params_file is not None:
             command += ["--params-file", str(params_file)]

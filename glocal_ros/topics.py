@@ -50,6 +50,9 @@ class TopicSpec:
     msgtype: str  # e.g. glocal_interfaces/msg/EpisodeRecord
     qos: QosSpec
     recorded: bool  # written to the run's bag by recorder_node
+    #: Published by a sim/learner pair (sim_node or learner_node), so under the pair's namespace in a run of
+    #: several pairs; else the curriculum's, under the run's namespace.
+    of_pair: bool = True
 
     @property
     def relative_name(self) -> str:
@@ -59,9 +62,9 @@ class TopicSpec:
 
 EPISODES = TopicSpec("/glocal/episodes", "glocal_interfaces/msg/EpisodeRecord", EPISODES_QOS, recorded=True)
 CURRICULUM_STATE = TopicSpec("/glocal/curriculum_state", "glocal_interfaces/msg/CurriculumState", LATCHED_QOS,
-                             recorded=True)
+                             recorded=True, of_pair=False)
 TASK_ASSIGNMENT = TopicSpec("/glocal/task_assignment", "glocal_interfaces/msg/TaskAssignment", LATCHED_QOS,
-                            recorded=True)
+                            recorded=True, of_pair=False)
 TRAINING_PROGRESS = TopicSpec("/glocal/training_progress", "glocal_interfaces/msg/TrainingProgress", EVENTS_QOS,
                               recorded=True)
 EVALUATIONS = TopicSpec("/glocal/evaluations", "glocal_interfaces/msg/EvaluationResult", EVENTS_QOS, recorded=True)

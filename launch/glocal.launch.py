@@ -2,6 +2,7 @@
 
     ros2 launch glocal_ros glocal.launch.py strategy:=glocal preset:=smoke seed:=0 \\
         namespace:=robot1 use_sim_time:=true out:=runs/smoke foxglove:=true
+    ros2 launch glocal_ros glocal.launch.py preset:=smoke pairs:=2 out:=runs/pairs
 
 Arguments (``ros2 launch glocal_ros glocal.launch.py --show-args`` lists them):
 ``strategy`` (default glocal), ``preset`` (a parameter file of
@@ -13,7 +14,11 @@ none; relative, so an including launch file's PushRosNamespace prefixes it)
 preset's; glocal_ros or paper, ``learner_node/profiles.py``) and ``foxglove``
 (default false; true also starts foxglove_bridge_node, first, serving the
 graph's topics on ws://``foxglove_host``:``foxglove_port``, default
-127.0.0.1:8765: another host is an explicit choice).
+127.0.0.1:8765: another host is an explicit choice) and ``pairs`` (default 1:
+the graph as it always was; K >= 2: K sim/learner pairs in ``pair0`` ..
+``pairK-1`` under the namespace, training GloCAL's local tasks at once, as
+``glocal-ros launch --pairs K`` starts them; refused with ``use_sim_time``
+and with a sequential strategy, not checked against the machine's cores).
 
 It starts recorder_node, sim_node, learner_node and curriculum_node with the
 parameters ``glocal-ros launch`` gives them, from the one plan of both
@@ -53,9 +58,9 @@ from launch.events import Shutdown
 from launch_ros.actions import Node
 
 from glocal_app.processes import (FOXGLOVE_HOST, FOXGLOVE_PORT, FoxgloveEndpoint, check_foxglove_endpoint,
-                                  claim_run_dir, default_run_dir, namespace_remappings, new_bag_path,
+                                  check_pairs, claim_run_dir, default_run_dir, namespace_remappings, new_bag_path,
                                   normalize_namespace, preset_file, run_nodes as planned_nodes, run_parameters,
-                                  run_settings)
+                                  run_settings, split_node_path)
 
 PACKAGE = "glocal_ros"
 #: As glocal_ros.curriculum.codes.STRATEGY_NAMES (not imported: see the docstring; a test compares them).
@@ -72,6 +77,12 @@ def params_dir() -> Path:
 def seed_value(text: str) -> int:
     if not text.strip().isdigit():
         raise ValueError(f"seed:={text!r}: expected a non-negative integer")
+    return int(text)
+
+
+def pairs_value(text: str) -> int:
+    if not text.strip().isdigit() or int(text) < 1:
+        raise ValueError(f"pairs:={text!r}: expected a number of sim/learner pairs, 1 or more")
     return int(text)
 
 
@@ -101,19 +112,24 @@ def run_nodes(context, *args, **kwargs) -> list:
     learner_profile = arguments["learner_profile"].strip() or None
     if learner_profile is not None and learner_profile not in LEARNER_PROFILES:
         raise ValueError(f"learner_profile:={learner_profile!r}: expected one of {', '.join(LEARNER_PROFILES)}")
-    claim_run_dir(run_dir, run_settings(strategy, preset, seed, learner_profile=learner_profile))
+    pairs = pairs_value(arguments["pairs"])
+    check_pairs(pairs, strategy, force=True, use_sim_time=use_sim_time)
+    claim_run_dir(run_dir, run_settings(strategy, preset, seed, learner_profile=learner_profile, pairs=pairs))
     plan = run_parameters(strategy, seed, run_dir, new_bag_path(run_dir), use_sim_time,
-                          learner_profile=learner_profile, foxglove=foxglove)
-    nodes = {
-        name: Node(
-            package=PACKAGE, executable=name, output="screen",
+                          learner_profile=learner_profile, foxglove=foxglove, pairs=pairs)
+
+    def node(path: str) -> Node:
+        pair, executable = split_node_path(path)
+        where = normalize_namespace(f"{namespace}/{pair}")
+        return Node(
+            package=PACKAGE, executable=executable, output="screen",
             # Relative: an including launch file's PushRosNamespace comes in front of it.
-            namespace=namespace.lstrip("/") or None,
-            parameters=[str(params_file), plan[name]],
-            remappings=namespace_remappings(namespace),
+            namespace=where.lstrip("/") or None,
+            parameters=[str(params_file), plan[path]],
+            remappings=namespace_remappings(where),
         )
-        for name in planned_nodes(foxglove)
-    }
+
+    nodes = {path: node(path) for path in planned_nodes(foxglove, pairs)}
     # The run is over when the curriculum node ends: stop the rest, as glocal-ros launch does.
     end_of_run = RegisterEventHandler(OnProcessExit(
         target_action=nodes["curriculum_node"],
@@ -147,5 +163,8 @@ def generate_launch_description() -> LaunchDescription:
         DeclareLaunchArgument("foxglove_host", default_value=FOXGLOVE_HOST, description="the address the bridge "
                               "serves on: 127.0.0.1 is this host only; e.g. 0.0.0.0 lets other hosts connect "
                               "(no authentication)"),
+        DeclareLaunchArgument("pairs", default_value="1", description="sim/learner pairs: 1, the graph as it "
+                              "always was; K >= 2 starts pairs in <namespace>/pair0 .. pairK-1 that train GloCAL's "
+                              "local tasks at once (glocal, glocal_random_cluster; wall-clock)"),
         OpaqueFunction(function=run_nodes),
     ])

@@ -5,6 +5,12 @@ the node's namespace (and its remappings): started with
 ``--ros-args -r __ns:=/robot1`` it records ``/robot1/glocal/episodes``, and
 the bag stores the resolved names, as ``ros2 bag record`` does.
 
+Several pairs: ``pair_namespaces`` (comma-separated, e.g. ``pair0,pair1``,
+relative to the node's namespace like any name; default "", one pair in the
+node's own namespace) records the topics a sim/learner pair publishes
+(``TopicSpec.of_pair``) under each pair's namespace, ``/pair1/glocal/episodes``,
+and the curriculum's under the node's own: one bag says which pair ran what.
+
 QoS: every topic is subscribed raw (serialized: written as it travelled)
 at start with the table's QoS, so that a latched message of a publisher
 that comes up later is not missed. Every ``GRAPH_POLL_SEC``, and at once
@@ -26,9 +32,9 @@ rclpy hands to a two-argument callback in its message info. The recorder's
 own timers run on the steady clock: they must tick while sim time stands
 still.
 
-EpisodeRecord.seq is checked as episodes arrive: every gap (an episode the
-recorder never got) is logged as a warning when it is seen, and the total
-with every gap when the bag closes (``glocal-ros bag check`` does the same
+EpisodeRecord.seq is checked as episodes arrive, per pair (each sim counts
+its own): every gap (an episode the recorder never got) is logged as a
+warning when it is seen, and the total with every gap when the bag closes (``glocal-ros bag check`` does the same
 on a bag afterwards). A recorder that was killed leaves a bag without
 metadata.yaml: ``glocal-ros bag repair`` recovers it, up to the last flush:
 every ``flush_interval_sec`` the pending chunk is closed and synced to disk.
@@ -123,12 +129,14 @@ class RecorderNode(Node):
         output = declare(self, "output", "bag", "rosbag2 directory to create (must not exist)")
         flush_interval = declare(self, "flush_interval_sec", 2.0, "seconds between chunk flushes to disk: "
                                  "the most a killed recorder loses", min_value=0.1, max_value=86_400.0)
-        self.topics = [_Topic(spec, self.resolve_topic_name(spec.relative_name), spec.qos)
-                       for spec in RECORDED_TOPICS]
-        self.episodes_topic = next(topic.name for topic in self.topics if topic.spec is EPISODES)
+        pairs = declare(self, "pair_namespaces", "", "the sim/learner pairs whose topics to record, comma-separated "
+                        "namespaces (e.g. pair0,pair1); '' for one pair in this node's own namespace")
+        self.pair_namespaces = pair_namespace_list(pairs)
+        self.topics = [_Topic(spec, self.resolve_topic_name(name), spec.qos)
+                       for spec, name in recorded_names(self.pair_namespaces)]
+        self.episode_seqs = {topic.name: SequenceTracker() for topic in self.topics if topic.spec is EPISODES}
         self.writer = BagWriter(Path(output), [replace(topic.spec, name=topic.name) for topic in self.topics])
         self.exit_code = 0
-        self.episode_seqs = SequenceTracker()
         # Triggered from a subscription's QoS event, run after it: the event's handler belongs to the
         # subscription that the look may replace.
         self._look_now = self.create_guard_condition(self._look_at_publishers)
@@ -200,16 +208,16 @@ class RecorderNode(Node):
             except RecordingStopped as stopped:
                 self._stop(stopped)
 
-        if topic != self.episodes_topic:
+        if topic not in self.episode_seqs:
             return write
 
         def write_and_check(data: bytes, info: dict) -> None:
             write(data, info)  # first: a message that fails the check is still recorded
-            self._check_episode_seq(data)
+            self._check_episode_seq(topic, data)
 
         return write_and_check
 
-    def _check_episode_seq(self, data: bytes) -> None:
+    def _check_episode_seq(self, topic: str, data: bytes) -> None:
         """Warn about a gap in EpisodeRecord.seq as soon as it shows.
 
         The seq is read from the CDR bytes without decoding the record (its
@@ -219,16 +227,19 @@ class RecorderNode(Node):
         seq = episode_seq_from_cdr(data)
         if seq is None:
             seq = deserialize_message(data, EpisodeRecord).seq
-        highest = self.episode_seqs.highest
-        self.episode_seqs.add(seq)
+        tracker = self.episode_seqs[topic]
+        where = f"{topic}: " if len(self.episode_seqs) > 1 else ""
+        highest = tracker.highest
+        tracker.add(seq)
         if highest is None:
             if seq:
-                self.get_logger().info(f"first episode has seq {seq}: seq 0..{seq - 1} came before the recording")
+                self.get_logger().info(f"{where}first episode has seq {seq}: seq 0..{seq - 1} came before the "
+                                       f"recording")
         elif seq > highest + 1:
             missing = f"{highest + 1}" if seq == highest + 2 else f"{highest + 1}..{seq - 1}"
-            self.get_logger().warning(f"episode seq gap: {missing} missing (got {seq} after {highest})")
+            self.get_logger().warning(f"{where}episode seq gap: {missing} missing (got {seq} after {highest})")
         elif seq <= highest:
-            self.get_logger().warning(f"episode seq {seq} after {highest}: a duplicate or out of order")
+            self.get_logger().warning(f"{where}episode seq {seq} after {highest}: a duplicate or out of order")
 
     def close(self) -> None:
         """Close the bag and report what it holds.
@@ -244,8 +255,28 @@ class RecorderNode(Node):
         logger = rclpy.logging.get_logger(f"{self.get_logger().name}.bag")
         counts = ", ".join(f"{topic} {count}" for topic, count in self.writer.counts.items() if count)
         logger.info(f"closed {self.writer.path}: {counts or 'no messages'}")
-        check = self.episode_seqs.result()
-        (logger.info if check.ok else logger.warning)(f"{self.episodes_topic}: {check.summary()}")
+        for topic, tracker in self.episode_seqs.items():
+            check = tracker.result()
+            (logger.info if check.ok else logger.warning)(f"{topic}: {check.summary()}")
+
+
+def pair_namespace_list(text: str) -> list[str]:
+    """``pair_namespaces`` as a list of names, relative or absolute ("" alone: one pair in the node's own
+    namespace); an empty entry among several, or a repeat, refused."""
+    namespaces = [part.strip() if part.strip() in ("", "/") else part.strip().rstrip("/") for part in text.split(",")]
+    if len(namespaces) > 1 and ("" in namespaces or len(set(namespaces)) != len(namespaces)):
+        raise ValueError(f"pair_namespaces {text!r}: expected distinct namespaces, e.g. pair0,pair1")
+    return namespaces
+
+
+def recorded_names(pair_namespaces: list[str]) -> list[tuple[TopicSpec, str]]:
+    """Each topic to record, with its name as the node resolves it: a pair's topics under each pair's
+    namespace (``of_pair``), the curriculum's under the node's own."""
+    def under(namespace: str, spec: TopicSpec) -> str:
+        return f"{namespace.rstrip('/')}/{spec.relative_name}" if namespace else spec.relative_name
+
+    return [(spec, under(namespace, spec)) for spec in RECORDED_TOPICS
+            for namespace in (pair_namespaces if spec.of_pair else [""])]
 
 
 def main(args=None) -> int:

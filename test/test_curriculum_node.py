@@ -103,7 +103,11 @@ def test_parallel_locals_over_two_pairs_in_their_namespaces(graph, tmp_path):
 def test_learner_namespaces_are_a_list_of_distinct_namespaces():
     from curriculum_node.curriculum_node import learner_namespace_list
 
-    assert learner_namespace_list("") == [""]
-    assert learner_namespace_list("/,pair1, /pair2/") == ["", "/pair1", "/pair2"]
+    assert learner_namespace_list("") == [""], "the default: the node's own names"
+    assert learner_namespace_list("/,pair1, /pair2/") == ["/", "/pair1", "/pair2"]
+    # Relative names resolve under the node's namespace, as ROS resolves every name.
+    assert learner_namespace_list("pair0,pair1", "/robot1") == ["/robot1/pair0", "/robot1/pair1"]
+    assert learner_namespace_list(",pair1", "/robot1") == ["/robot1", "/robot1/pair1"]
+    assert learner_namespace_list("/,/pair2", "/robot1") == ["/", "/pair2"]
     with pytest.raises(ValueError, match="repeat"):
         learner_namespace_list("pair0,/pair0")

@@ -31,7 +31,7 @@ from glocal_ros.curriculum.codes import STRATEGY_NAMES
 
 LAUNCH_FILE = REPO / "launch" / "glocal.launch.py"
 ARGUMENTS = {"strategy", "preset", "seed", "out", "namespace", "use_sim_time", "learner_profile", "foxglove",
-             "foxglove_port", "foxglove_host"}
+             "foxglove_port", "foxglove_host", "pairs"}
 #: What the launch file may import: ROS's launch API, the ament index and the stdlib-only plan.
 ALLOWED_IMPORTS = {"__future__", "pathlib", "launch", "launch.actions", "launch.event_handlers", "launch.events",
                    "launch_ros.actions", "ament_index_python.packages", "glocal_app.processes"}
