@@ -177,8 +177,8 @@ class CurriculumNode(Node):
 
     def drain(self) -> None:
         """Deliver the latest state and assignment to every subscriber the graph lists (at most
-        ``DRAIN_SEC`` to match and ``DRAIN_SEC`` to acknowledge), on Ctrl-C as at the end: a recorder that has not matched this node's
-        publishers yet (a loaded machine) would otherwise close its bag without them."""
+        ``DRAIN_SEC`` to match and ``DRAIN_SEC`` to acknowledge), on Ctrl-C as at the end: a recorder that has
+        not matched this node's publishers yet (a loaded machine) would otherwise close its bag without them."""
         for publisher in (self.state_pub, self.assignment_pub):
             deadline = time.monotonic() + DRAIN_SEC
             while (publisher.get_subscription_count() < self.count_subscribers(publisher.topic_name)

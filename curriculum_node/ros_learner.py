@@ -208,7 +208,8 @@ class RosLearner:
                     raise ServiceCallError(
                         f"{names.LEARNER_TRAIN} answered no goal within {self.timeout_sec:.0f} s") from None
                 self.node.get_logger().warning(
-                    f"no answer to the goal {goal.output_policy} in {GOAL_RESPONSE_TIMEOUT_SEC:.0f} s: sending it again")
+                    f"no answer to the goal {goal.output_policy} in {GOAL_RESPONSE_TIMEOUT_SEC:.0f} s: "
+                    f"sending it again")
                 continue
             if handle.accepted:
                 return handle

@@ -95,14 +95,19 @@ def add_graph_arguments(parser: argparse.ArgumentParser) -> None:
     add_profile_argument(parser, default=None)
 
 
-def add_pairs_arguments(parser: argparse.ArgumentParser) -> None:
-    """``--pairs`` and ``--force``, checked by ``check_pairs_arguments`` (set as the command's ``check``)."""
+def add_pairs_arguments(parser: argparse.ArgumentParser, remote: bool = False) -> None:
+    """``--pairs`` and ``--force`` (and, with ``remote``, ``--remote-pairs``), checked by ``check_pairs_arguments``
+    (set as the command's ``check``)."""
     parser.add_argument("--pairs", type=int, default=1, metavar="K",
                         help="sim/learner pairs, each in its namespace pair0..pairK-1 under the run's, training "
                              "GloCAL's local tasks at once (parallel_locals); default 1: one pair, no pair "
                              "namespace, the sequential run")
     parser.add_argument("--force", action="store_true",
                         help="start more pairs than this machine has cores")
+    if remote:
+        parser.add_argument("--remote-pairs", type=int, default=0, metavar="R",
+                            help="of the K pairs, the last R are started on other hosts (`glocal-ros pair`), "
+                                 "not here; the launch waits for them on your ROS_DOMAIN_ID (default 0)")
 
 
 def check_pairs_arguments(args: argparse.Namespace) -> None:
@@ -110,8 +115,9 @@ def check_pairs_arguments(args: argparse.Namespace) -> None:
     from glocal_app.processes import check_pairs
 
     strategies = args.strategies if hasattr(args, "strategies") else [args.strategy]
+    remote = getattr(args, "remote_pairs", 0)
     for strategy in strategies:
-        check_pairs(args.pairs, strategy, args.force, args.use_sim_time)
+        check_pairs(args.pairs, strategy, args.force, args.use_sim_time, remote=remote)
 
 
 def add_profile_argument(parser: argparse.ArgumentParser, default: str | None = DEFAULT_PROFILE) -> None:

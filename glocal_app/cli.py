@@ -88,10 +88,16 @@ def cmd_launch(args: argparse.Namespace) -> int:
     foxglove = None if args.foxglove is None else FoxgloveEndpoint(
         args.foxglove, *(() if args.foxglove_host is None else (args.foxglove_host,)))
     graph = dict(namespace=args.namespace, use_sim_time=args.use_sim_time, learner_profile=args.profile,
-                 foxglove=foxglove, pairs=args.pairs)
+                 foxglove=foxglove, pairs=args.pairs, remote_pairs=args.remote_pairs)
     if args.watchdog is None:
         return launch(args.strategy, args.preset, args.seed, args.out, **graph)
     return launch(args.strategy, args.preset, args.seed, args.out, watchdog_sec=args.watchdog, **graph)
+
+
+def cmd_pair(args: argparse.Namespace) -> int:
+    from glocal_app.launch import serve_pair
+
+    return serve_pair(args.out, args.index, args.namespace)
 
 
 def cmd_experiment(args: argparse.Namespace) -> int:
@@ -136,8 +142,16 @@ def add_graph_commands(commands) -> None:
     launch.add_argument("--foxglove-host", default=None, metavar="HOST",
                         help=f"serve Foxglove on HOST instead of {FOXGLOVE_HOST} (this host only); e.g. 0.0.0.0 "
                              f"lets every host that reaches the port see the graph, with no authentication")
-    add_pairs_arguments(launch)
+    add_pairs_arguments(launch, remote=True)
     launch.set_defaults(func=cmd_launch, check=check_pairs_arguments)
+
+    pair = commands.add_parser("pair", help="start one sim/learner pair of a `launch --remote-pairs` run on this "
+                               "host, on your ROS_DOMAIN_ID, until Ctrl-C")
+    pair.add_argument("--out", type=Path, required=True,
+                      help="the launch's run directory, mounted here at the same path (its run.json and policies/)")
+    pair.add_argument("--index", type=int, required=True, help="which pair: one of the launch's remote pairs")
+    pair.add_argument("--namespace", default="", metavar="NS", help="the launch's --namespace")
+    pair.set_defaults(func=cmd_pair)
 
     experiment = commands.add_parser("experiment", help="strategies x seeds as separate runs (resumable), "
                                      "then one report")

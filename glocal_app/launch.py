@@ -61,9 +61,10 @@ from glocal_app.arguments import EXIT_FAILED, EXIT_INTERRUPTED, EXIT_STALLED
 from glocal_app.processes import (FoxgloveEndpoint, NodeProcess, check_foxglove_endpoint, check_pairs, check_run_dir,
                                    claim_run_dir, isolated_environment, namespace_arguments, new_bag_path,
                                    normalize_namespace, pair_namespaces, preset_file, preset_parameters,
-                                   run_nodes, run_parameters, run_settings, split_node_path, STATE_FILE)
+                                   node_path, recorded_run_settings, remote_pair_indices, run_nodes, run_parameters,
+                                   run_settings, split_node_path, PAIR_NAMESPACE, PAIR_NODES, STATE_FILE)
 from glocal_ros.curriculum.codes import STRATEGY_NAMES
-from glocal_ros.domain import choose_domain_id
+from glocal_ros.domain import choose_domain_id, domain_id_from_environment
 from glocal_ros.recording import message_counts
 from node_common import names, qos
 from node_common.runner import configure_discovery
@@ -73,6 +74,10 @@ STATUS_NAMES = {value: name.removeprefix("STATUS_").lower() for name, value in v
 #: Seconds without an episode, a progress report or a curriculum state before a run counts as hung.
 #: Longer than the curriculum's own re-send of an unanswered goal (ros_learner.GOAL_RESPONSE_TIMEOUT_SEC).
 DEFAULT_WATCHDOG_SEC = 60.0
+#: How much longer than the start-up timeout a launch waits for pairs started on other hosts (by hand).
+REMOTE_PAIR_WAIT_SEC = 600.0
+#: How long a launch on the user's ROS_DOMAIN_ID listens for the domain's nodes before it checks its names.
+DISCOVERY_SEC = 3.0
 LEARNER_PROBE_SEC = 5.0
 #: What the watchdog calls the curriculum's state: once heard, the run has started.
 CURRICULUM_HEARD = "curriculum state"
@@ -221,18 +226,21 @@ def check_graph(node, watchdog: Watchdog, progress: Progress, started: Sequence[
 def launch(strategy: str, preset: str, seed: int, run_dir: Path, startup_timeout: float = 120.0,
            report: bool = True, watchdog_sec: float = DEFAULT_WATCHDOG_SEC, namespace: str = "",
            use_sim_time: bool = False, step_budget: int | None = None, learner_profile: str | None = None,
-           foxglove: FoxgloveEndpoint | None = None, pairs: int = 1) -> int:
+           foxglove: FoxgloveEndpoint | None = None, pairs: int = 1, remote_pairs: int = 0) -> int:
     """Run (or resume) one run in ``run_dir``; the curriculum's exit code, ``EXIT_INTERRUPTED`` on Ctrl-C or
     ``EXIT_STALLED``.
 
     ``step_budget`` replaces the preset's training-step budget, ``learner_profile`` its learner
     profile; ``foxglove`` starts foxglove_bridge_node there, before the other nodes; ``pairs`` sim/learner
-    pairs train GloCAL's local tasks at once. Bad input (an unknown preset or profile, a budget below one
-    evaluation interval, an invalid namespace or ROS_DOMAIN_ID, another run's directory, a Foxglove port
-    that is taken or invalid, pairs that ``check_pairs`` refuses but for the machine's cores, which the
-    command line checks) raises ``ValueError`` before anything starts.
+    pairs train GloCAL's local tasks at once, the last ``remote_pairs`` of them started on other hosts
+    (``serve_pair``; the launch waits for them on the user's ROS_DOMAIN_ID). Bad input (an unknown preset or
+    profile, a budget below one evaluation interval, an invalid namespace or ROS_DOMAIN_ID, another run's
+    directory, a Foxglove port that is taken or invalid, pairs that ``check_pairs`` refuses but for the
+    machine's cores, which the command line checks, remote pairs without a ROS_DOMAIN_ID set, a node of the
+    plan already running on the user's domain: ``check_names_free``) raises ``ValueError`` before anything
+    starts.
     """
-    check_pairs(pairs, strategy, force=True, use_sim_time=use_sim_time)
+    check_pairs(pairs, strategy, force=True, use_sim_time=use_sim_time, remote=remote_pairs)
     params_file = preset_file(preset)
     check_episode_steps(preset)
     check_step_budget(preset, step_budget)
@@ -240,10 +248,23 @@ def launch(strategy: str, preset: str, seed: int, run_dir: Path, startup_timeout
     namespace = normalize_namespace(namespace)
     if foxglove is not None:
         check_foxglove_endpoint(foxglove)
+    remote = {PAIR_NAMESPACE.format(index) for index in remote_pair_indices(pairs, remote_pairs)}
+    *graph, last = [path for path in run_nodes(foxglove, pairs) if split_node_path(path)[0] not in remote]
     domain = choose_domain_id()
+    node = None
     try:
+        if remote_pairs and not domain.from_environment:
+            raise ValueError(f"--remote-pairs {remote_pairs}: set ROS_DOMAIN_ID (the same on every host) and a "
+                             f"discovery that reaches them (ROS_AUTOMATIC_DISCOVERY_RANGE=SUBNET or a Fast DDS "
+                             f"discovery server)")
+        node = launcher_node(domain.domain_id, namespace)
+        if domain.from_environment:  # a free domain has no other graph
+            check_names_free(node, [full_node_name(namespace, path) for path in (*graph, last)])
         resumed = claim_run_dir(run_dir, run_settings(strategy, preset, seed, step_budget, learner_profile, pairs))
     except ValueError:
+        if node is not None:
+            node.destroy_node()
+            rclpy.try_shutdown()
         domain.close()
         raise
     logs = run_dir / "logs"
@@ -254,7 +275,6 @@ def launch(strategy: str, preset: str, seed: int, run_dir: Path, startup_timeout
     print(f"{'resuming' if resumed else 'launching'} preset {preset}, strategy {strategy}, seed {seed}{where} "
           f"on {domain.describe()}; logs in {logs}", flush=True)
 
-    node = launcher_node(domain.domain_id, namespace)
     progress = Progress()
     watchdog = Watchdog(watchdog_sec, startup_timeout)
     pairs_here = pair_namespaces(pairs)
@@ -272,12 +292,15 @@ def launch(strategy: str, preset: str, seed: int, run_dir: Path, startup_timeout
 
     exit_code = EXIT_FAILED
     try:
-        *graph, last = run_nodes(foxglove, pairs)
         for path in graph:
             start(path)
         if foxglove is not None:
             print(f"Foxglove: open a connection to {foxglove.url} (layout: assets/foxglove/glocal.json)", flush=True)
-        wait_for_recorder(node, started, startup_timeout, pairs_here)
+        for index in remote_pair_indices(pairs, remote_pairs):
+            print(f"waiting for pair {index}: on its host, with this run directory at the same path, "
+                  f"ROS_DOMAIN_ID={domain.domain_id} glocal-ros pair --out {run_dir} --index {index}"
+                  + (f" --namespace {namespace}" if namespace else ""), flush=True)
+        wait_for_recorder(node, started, startup_timeout + (REMOTE_PAIR_WAIT_SEC if remote_pairs else 0), pairs_here)
         curriculum = start(last)
         watchdog.started = time.monotonic()
         exit_code = follow_curriculum(node, watchdog, progress, started, curriculum, pairs_here)
@@ -298,6 +321,75 @@ def launch(strategy: str, preset: str, seed: int, run_dir: Path, startup_timeout
     print_bag_summary(bag)
     if report:
         write_run_report([run_dir], run_dir / "report")
+    return exit_code
+
+
+def full_node_name(namespace: str, path: str) -> str:
+    """The fully qualified name of the plan's node ``path`` in a run under ``namespace``: ``/robot1/pair1/sim_node``."""
+    pair, executable = split_node_path(path)
+    return f"{normalize_namespace(f'{namespace}/{pair}').rstrip('/')}/{executable}"
+
+
+def check_names_free(node, planned: Sequence[str], discovery_sec: float = DISCOVERY_SEC) -> None:
+    """``ValueError`` when a node of ``planned`` (fully qualified names) already runs on the domain: another
+    graph in the same namespace, whose topics and services this run's would meet. Waits ``discovery_sec``
+    for the domain's nodes to show first."""
+    deadline = time.monotonic() + discovery_sec
+    while time.monotonic() < deadline:
+        rclpy.spin_once(node, timeout_sec=0.1)
+    running = {f"{space.rstrip('/')}/{name}" for name, space in node.get_node_names_and_namespaces()}
+    taken = [name for name in planned if name in running]
+    if taken:
+        raise ValueError(f"{', '.join(taken)} already run(s) on this ROS_DOMAIN_ID: another graph uses these "
+                         f"namespaces; give this run another --namespace (or ROS_DOMAIN_ID)")
+
+
+def serve_pair(run_dir: Path, index: int, namespace: str = "") -> int:
+    """``glocal-ros pair``: pair ``index`` of the run in ``run_dir`` (a ``launch --pairs K --remote-pairs R`` on
+    another host), its sim and learner started here as that launch plans them, on the user's ROS_DOMAIN_ID,
+    until Ctrl-C or one of them ends; 0 after Ctrl-C, else ``EXIT_FAILED``.
+
+    ``run_dir`` is the launch's run directory, mounted here at the same path: its ``run.json`` says which run
+    this is, and its ``policies/`` is the store every learner shares. ``namespace``: the launch's
+    ``--namespace``. ``ValueError`` before anything starts for a directory that holds no run of several
+    pairs, an index not among them, or no ROS_DOMAIN_ID.
+    """
+    settings = recorded_run_settings(run_dir)
+    if settings is None:
+        raise ValueError(f"{run_dir} holds no run: start `glocal-ros launch --pairs K --remote-pairs R --out "
+                         f"{run_dir}` first, with this directory at the same path on both hosts")
+    pairs = int(settings.get("pairs", 1))
+    if not 0 <= index < pairs or pairs < 2:
+        raise ValueError(f"{run_dir} holds a run of {pairs} pair(s): --index {index} is not one of its pairs "
+                         f"(0 to {pairs - 1})")
+    domain_id = domain_id_from_environment()
+    if domain_id is None:
+        raise ValueError("set ROS_DOMAIN_ID to the launch's (it prints it) and a discovery that reaches its host")
+    namespace = normalize_namespace(namespace)
+    plan = run_parameters(str(settings["strategy"]), int(settings["seed"]), run_dir, run_dir / "bag",
+                          learner_profile=settings.get("learner_profile"), pairs=pairs)
+    pair = PAIR_NAMESPACE.format(index)
+    logs = run_dir / "logs"
+    env = isolated_environment(domain_id, logs, keep_discovery_range=True)
+    params_file = preset_file(str(settings["preset"]))
+    signal.signal(signal.SIGTERM, signal.default_int_handler)
+    started: list[NodeProcess] = []
+    exit_code = EXIT_FAILED
+    try:
+        for executable in PAIR_NODES:
+            path = node_path(pair, executable)
+            started.append(NodeProcess(executable, logs, plan[path], params_file, env, name=path,
+                                       extra_args=namespace_arguments(normalize_namespace(f"{namespace}/{pair}"))))
+        print(f"pair {index} of {run_dir} on ROS_DOMAIN_ID {domain_id}: {', '.join(p.name for p in started)}; "
+              f"logs in {logs}; Ctrl-C stops it", flush=True)
+        while all(process.running for process in started):
+            time.sleep(0.5)
+        ended = next(process for process in started if not process.running)
+        print(f"{ended.name} ended: see {ended.log_path}", flush=True)
+    except KeyboardInterrupt:
+        exit_code = 0
+    finally:
+        stop_graph(started)
     return exit_code
 
 
@@ -341,16 +433,23 @@ def listen_for_progress(node, progress: Progress, watchdog: Watchdog, pairs: Seq
 def wait_for_recorder(node, started: Sequence[NodeProcess], timeout: float, pairs: Sequence[str] = ("",)) -> None:
     """Until the recorder listens to every pair's episode stream, so that the bag holds every episode from seq 0.
 
-    ``RuntimeError`` naming the node and its log when a started node ends, or after ``timeout`` seconds.
+    ``RuntimeError`` naming the node and its log when a started node ends, or after ``timeout`` seconds the
+    streams that nothing publishes yet (a pair started elsewhere) or nothing records.
     """
     deadline = time.monotonic() + timeout
     topics = [pair_name(pair, names.EPISODES) for pair in pairs]
-    while any(node.count_subscribers(topic) < 1 or node.count_publishers(topic) < 1 for topic in topics):
+
+    def waiting() -> list[str]:
+        return [topic for topic in topics if node.count_subscribers(topic) < 1 or node.count_publishers(topic) < 1]
+
+    while waiting():
         rclpy.spin_once(node, timeout_sec=0.1)
         failed = [p for p in started if not p.running]
-        if failed or time.monotonic() > deadline:
-            culprit = (failed or started)[0]
-            raise RuntimeError(f"{culprit.name} did not start: see {culprit.log_path}")
+        if failed:
+            raise RuntimeError(f"{failed[0].name} did not start: see {failed[0].log_path}")
+        if time.monotonic() > deadline:
+            raise RuntimeError(f"after {timeout:.0f} s, no sim publishes or no recorder records "
+                               f"{', '.join(waiting())}: see the logs in {started[0].log_path.parent}")
 
 
 def follow_curriculum(node, watchdog: Watchdog, progress: Progress, started: Sequence[NodeProcess],

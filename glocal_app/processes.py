@@ -286,24 +286,33 @@ def run_parameters(strategy: str, seed: int, run_dir: Path, bag: Path, use_sim_t
 
 
 def check_pairs(pairs: int, strategy: str | None = None, force: bool = False, use_sim_time: bool = False,
-                cpus: int | None = None) -> None:
-    """``ValueError`` unless a run can start ``pairs`` sim/learner pairs here: at least one, no more than this
-    machine's cores (``os.cpu_count()``; each pair is a sim and a learner busy at once) unless ``force``, and
-    several only for a strategy that trains on several at once (``PARALLEL_STRATEGIES``: the others are
-    sequential and would leave every pair but the first idle) and on wall-clock (each pair's sim has a clock
-    of its own: there is no one sim time to record a bag of several pairs on)."""
+                cpus: int | None = None, remote: int = 0) -> None:
+    """``ValueError`` unless a run can have ``pairs`` sim/learner pairs, ``remote`` of them started on other
+    hosts: at least one pair, no more started here than this machine's cores (``os.cpu_count()``; each pair is
+    a sim and a learner busy at once) unless ``force``, and several only for a strategy that trains on several
+    at once (``PARALLEL_STRATEGIES``: the others are sequential and would leave every pair but the first idle)
+    and on wall-clock (each pair's sim has a clock of its own: there is no one sim time to record a bag of
+    several pairs on). Remote pairs are pairs of a run of several (a run of one has no pair namespace)."""
     if pairs > 1 and use_sim_time:
         raise ValueError(f"--pairs {pairs} with --use-sim-time: each pair's sim has a clock of its own, so a run "
                          f"of several pairs records on wall-clock")
     if pairs < 1:
         raise ValueError(f"--pairs {pairs}: a run needs at least one sim/learner pair")
+    if remote and (remote < 0 or remote > pairs or pairs < 2):
+        raise ValueError(f"--remote-pairs {remote} of --pairs {pairs}: expected 0, or 1 to {pairs} of a run of "
+                         f"2 pairs or more")
     cpus = (os.cpu_count() or 1) if cpus is None else cpus
-    if pairs > cpus and not force:
+    if pairs - remote > cpus and not force:
         raise ValueError(f"--pairs {pairs} is more pairs than this machine has cores ({cpus}); each pair is a sim "
                          f"and a learner training at once: --force starts them anyway")
     if pairs > 1 and strategy is not None and strategy not in PARALLEL_STRATEGIES:
         raise ValueError(f"--pairs {pairs} with strategy {strategy}: only {', '.join(PARALLEL_STRATEGIES)} train "
                          f"local tasks on several pairs at once (the other strategies are sequential)")
+
+
+def remote_pair_indices(pairs: int, remote: int) -> range:
+    """The indices of the pairs started on other hosts: the last ``remote`` of ``pairs``."""
+    return range(pairs - remote, pairs)
 
 
 def ros_param_text(value) -> str:
@@ -314,7 +323,8 @@ def ros_param_text(value) -> str:
 
 
 class NodeProcess:
-    """One node process. Its output goes to ``<log_dir>/<name>-<time>.log`` (``pair1-sim_node-...`` for ``pair1/sim_node``).
+    """One node process. Its output goes to ``<log_dir>/<name>-<time>.log`` (``pair1-sim_node-...`` for
+    ``pair1/sim_node``).
 
     ``node`` is the executable; ``name`` what messages call it, its path in the run's plan (``node_path``;
     default: ``node``).

@@ -148,3 +148,30 @@ def test_launch_refuses_a_bad_or_taken_foxglove_port_before_anything_starts(tmp_
             result = run_cli("launch", "--preset", "smoke", "--out", str(tmp_path / "run"), *flags)
             assert result.returncode == 2 and error in result.stderr, result.stderr
             assert "Traceback" not in result.stderr and not (tmp_path / "run").exists()
+
+
+def test_launch_and_experiment_refuse_bad_pairs_before_anything_starts(tmp_path):
+    import os
+
+    too_many = str((os.cpu_count() or 1) + 1)
+    for command, args, error in (
+        ("launch", ("--pairs", "0"), "at least one sim/learner pair"),
+        ("launch", ("--pairs", too_many), "--force starts them anyway"),
+        ("launch", ("--pairs", "2", "--strategy", "random"), "sequential"),
+        ("launch", ("--pairs", "2", "--use-sim-time"), "clock of its own"),
+        ("launch", ("--pairs", "2", "--remote-pairs", "3"), "expected 0, or 1 to 2"),
+        ("experiment", ("--pairs", "2", "--strategies", "glocal,glocal_no_global"), "sequential"),
+    ):
+        result = run_cli(command, "--preset", "smoke", "--out", str(tmp_path / "run"), *args)
+        assert result.returncode == 2 and error in result.stderr, (command, args, result.stderr)
+        assert "Traceback" not in result.stderr and not (tmp_path / "run").exists()
+
+
+def test_pair_refuses_a_directory_without_a_run_of_that_pair_before_anything_starts(tmp_path):
+    result = run_cli("pair", "--out", str(tmp_path / "run"), "--index", "1")
+    assert result.returncode == 2 and "holds no run" in result.stderr, result.stderr
+    (tmp_path / "run").mkdir()
+    (tmp_path / "run" / "run.json").write_text('{"strategy": "glocal", "preset": "smoke", "seed": 0, "pairs": 2}')
+    result = run_cli("pair", "--out", str(tmp_path / "run"), "--index", "2")
+    assert result.returncode == 2 and "is not one of its pairs (0 to 1)" in result.stderr, result.stderr
+    assert sorted(path.name for path in (tmp_path / "run").iterdir()) == ["run.json"], "nothing started"

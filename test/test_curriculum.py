@@ -8,7 +8,7 @@ import pytest
 from glocal_ros.clustering import cluster_tasks, split_global_local
 from glocal_ros.curriculum.journal import JournaledLearner, JournalMismatch
 from glocal_ros.curriculum.codes import (
-    ROLE_CLUSTER, ROLE_GLOBAL, ROLE_LOCAL, ROLE_SAMPLED, STATUS_EVALUATING, STATUS_FINISHED,
+    ROLE_CLUSTER, ROLE_GLOBAL, ROLE_SAMPLED, STATUS_EVALUATING, STATUS_FINISHED,
 )
 from glocal_ros.curriculum.learner import TrainRequest
 from glocal_ros.curriculum.run import Run, RunConfig

@@ -16,7 +16,7 @@ import time
 import pytest
 from rosbags.highlevel import AnyReader
 
-from conftest import REPO, smoke_tasks
+from conftest import REPO, smoke_tasks, wait_until
 from glocal_ros.domain import choose_domain_id, domain_id_from_environment, hold_domain_id, reserve_domain_id
 from glocal_ros.recording import episode_sequence, graph_typestore
 
@@ -235,9 +235,71 @@ def test_namespace_sim_time_and_profile_reach_launch_and_experiment(monkeypatch,
     assert main(["launch", "--preset", "smoke", "--out", str(tmp_path), "--namespace", "robot1",
                  "--use-sim-time", "--profile", "paper"]) == 0
     assert main(["experiment", "--strategies", "random", "--seeds", "0", "--out", str(tmp_path)]) == 0
-    assert calls[0][1] == {"namespace": "robot1", "use_sim_time": True, "learner_profile": "paper", "foxglove": None}
+    assert calls[0][1] == {"namespace": "robot1", "use_sim_time": True, "learner_profile": "paper", "foxglove": None,
+                           "pairs": 1, "remote_pairs": 0}
     assert calls[1][1] == {"namespace": "", "use_sim_time": False, "step_budget": None, "learner_profile": None,
-                           "ray_address": None, "ray_cpus_per_run": 2}
+                           "ray_address": None, "ray_cpus_per_run": 2, "pairs": 1}
     assert main(["experiment", "--strategies", "random", "--seeds", "0", "--out", str(tmp_path), "--ray",
                  "10.0.0.5:6379", "--ray-cpus-per-run", "3"]) == 0
     assert (calls[2][1]["ray_address"], calls[2][1]["ray_cpus_per_run"]) == ("10.0.0.5:6379", 3)
+
+
+def test_a_run_of_two_pairs_one_started_as_on_another_host_records_every_pair_and_call(tmp_path):
+    """``launch --pairs 2 --remote-pairs 1`` starts pair0 here and waits for pair1, which ``glocal-ros pair``
+    starts from the run directory on the same ROS_DOMAIN_ID (another host's part, here on loopback).
+
+    Both learners answer calls; every assignment in the bag is a call the journal holds, with its
+    answer, and each pair's episodes are in the bag under its namespace, in sequence.
+    """
+    import json
+
+    domain_id, lock = reserve_domain_id()
+    lock.close()
+    env = graph_env(ROS_DOMAIN_ID=str(domain_id))
+    run_dir = tmp_path / "run"
+    command = [*CLI, "launch", "--preset", "smoke", "--seed", "5", "--out", str(run_dir), "--pairs", "2",
+               "--remote-pairs", "1"]
+    launcher = subprocess.Popen(command, stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True, cwd=REPO,
+                                env=env)
+    pair = None
+    try:
+        deadline = time.monotonic() + 120
+        while not (run_dir / "run.json").is_file():
+            assert launcher.poll() is None and time.monotonic() < deadline, "the launch claimed no run directory"
+            time.sleep(0.2)
+        pair = subprocess.Popen([*CLI, "pair", "--out", str(run_dir), "--index", "1"], stdout=subprocess.PIPE,
+                                stderr=subprocess.STDOUT, text=True, cwd=REPO, env=env)
+        output, _ = launcher.communicate(timeout=600)
+        assert launcher.returncode == 0, output
+        assert f"ROS_DOMAIN_ID={domain_id} glocal-ros pair --out {run_dir} --index 1" in output
+        assert pair.poll() is None, "the pair serves until Ctrl-C"
+        pair.send_signal(signal.SIGINT)
+        assert pair.wait(timeout=60) == 0, pair.stdout.read()
+    finally:
+        for process in (launcher, pair):
+            if process is not None and process.poll() is None:
+                process.kill()
+
+    assert json.loads((run_dir / "run.json").read_text())["pairs"] == 2
+    entries = [json.loads(line) for line in (run_dir / "curriculum" / "journal.jsonl").read_text().splitlines()[1:]]
+    assert {entry["learner"] for entry in entries} == {0, 1}, "the second pair took calls while the first trained"
+    trained = {entry["arguments"]["output_policy"]: entry for entry in entries if entry["call"] == "train"}
+    assignments = read(run_dir / "bag", "/glocal/task_assignment")
+    assert assignments and {a.output_policy for a in assignments} == set(trained)
+    assert all("learned" in entry["answer"] for entry in trained.values())
+    assert read(run_dir / "bag", "/glocal/curriculum_state")[-1].status == 5
+    for topic in ("/pair0/glocal/episodes", "/pair1/glocal/episodes"):
+        check = episode_sequence(run_dir / "bag", topic)
+        assert check.ok and check.count > 0, (topic, check.summary())
+
+
+def test_a_launch_into_a_namespace_another_graph_uses_is_refused_before_anything_starts(tmp_path, start_node,
+                                                                                        ros_node):
+    """On the user's ROS_DOMAIN_ID (the suite's here), a recorder already running in /robot1 takes the name."""
+    start_node("recorder_node", extra_args=("-r", "__ns:=/robot1"), output=str(tmp_path / "other-bag"))
+    wait_until(lambda: ("recorder_node", "/robot1") in ros_node.get_node_names_and_namespaces(), 60,
+               "the other graph's recorder")
+    refused = launch(tmp_path / "run", "--namespace", "robot1", env=dict(os.environ), timeout=120)
+    assert refused.returncode == 2, refused.stdout + refused.stderr
+    assert "/robot1/recorder_node already run(s) on this ROS_DOMAIN_ID" in refused.stderr
+    assert not (tmp_path / "run").exists(), "nothing was claimed or started"

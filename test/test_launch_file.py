@@ -234,3 +234,36 @@ def test_a_bad_or_taken_foxglove_port_is_refused_before_anything_starts(launch_f
         with pytest.raises(ValueError, match=error):
             evaluate(launch_file, out=str(tmp_path / "run"), foxglove="true", foxglove_port=port)
     assert not (tmp_path / "run").exists()
+
+
+def test_pairs_start_every_pair_in_its_namespace_as_glocal_ros_launch_plans_them(launch_file, tmp_path):
+    """pairs:=2 namespace:=robot1: the recorder and curriculum in robot1, each pair's sim and learner in
+    robot1/pair0 and robot1/pair1, with the plan's parameters (one policy directory, the pairs named to the
+    recorder and the curriculum)."""
+    out = tmp_path / "run"
+    actions = launch_standins.evaluate(launch_file["generate_launch_description"](), preset="smoke", pairs="2",
+                                       namespace="robot1", out=str(out))
+    nodes = [a for a in actions if isinstance(a, launch_standins.Node)]
+    paths = [f"{node.namespace.removeprefix('robot1').strip('/')}/{node.executable}".lstrip("/") for node in nodes]
+    assert paths == ["recorder_node", "pair0/sim_node", "pair0/learner_node", "pair1/sim_node",
+                     "pair1/learner_node", "curriculum_node"]
+    assert all(node.remappings == [("/clock", "clock")] for node in nodes), "each hears its own namespace's clock"
+    plan = {path: parameters(node)[1] for path, node in zip(paths, nodes)}
+    assert plan == run_parameters("glocal", 0, out, out / "bag", pairs=2)
+    assert plan["curriculum_node"]["learner_namespaces"] == "pair0,pair1"
+    assert plan["curriculum_node"]["parallel_locals"] is True
+    assert plan["recorder_node"]["pair_namespaces"] == "pair0,pair1"
+    assert {plan[f"pair{i}/learner_node"]["policy_dir"] for i in range(2)} == {str(out / "policies")}
+    assert json.loads((out / "run.json").read_text())["pairs"] == 2
+
+
+@pytest.mark.parametrize("arguments, error", [
+    ({"pairs": "0"}, "expected a number of sim/learner pairs"),
+    ({"pairs": "two"}, "expected a number of sim/learner pairs"),
+    ({"pairs": "2", "strategy": "random"}, "sequential"),
+    ({"pairs": "2", "use_sim_time": "true"}, "clock of its own"),
+])
+def test_bad_pairs_are_refused_before_anything_starts(launch_file, tmp_path, arguments, error):
+    with pytest.raises(ValueError, match=error):
+        evaluate(launch_file, out=str(tmp_path / "run"), **arguments)
+    assert not (tmp_path / "run").exists()

@@ -21,7 +21,6 @@ from pathlib import Path
 import pytest
 from builtin_interfaces.msg import Time
 from glocal_interfaces.msg import CurriculumState, EpisodeRecord
-from rclpy.duration import Duration
 from rclpy.qos import QoSProfile, ReliabilityPolicy
 from rclpy.serialization import serialize_message
 from rosbags.interfaces import QosDurability, QosHistory, QosReliability

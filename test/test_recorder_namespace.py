@@ -113,3 +113,20 @@ def test_a_namespaced_recorder_records_its_namespace_and_closes_quietly(start_no
     assert counts["/robot1/glocal/episodes"] == 5
     check = episode_sequence(bag)
     assert (check.count, check.first, check.last, check.ok) == (5, 0, 4, True), check.summary()
+
+
+def test_a_recorder_of_several_pairs_records_each_pairs_topics_under_its_namespace():
+    from recorder_node.recorder_node import pair_namespace_list, recorded_names
+
+    assert pair_namespace_list("") == [""]
+    assert pair_namespace_list(" pair0, pair1/ ") == ["pair0", "pair1"]
+    for bad in ("pair0,pair0", "pair0,", ",pair1"):
+        with pytest.raises(ValueError, match="distinct namespaces"):
+            pair_namespace_list(bad)
+    assert recorded_names([""]) == [(spec, spec.relative_name) for spec in RECORDED_TOPICS]
+    names_ = recorded_names(["pair0", "/lab/pair1"])
+    assert ("glocal/curriculum_state" in [name for spec, name in names_ if spec is CURRICULUM_STATE]
+            and len([name for spec, name in names_ if spec is CURRICULUM_STATE]) == 1), "the curriculum's, once"
+    assert [name for spec, name in names_ if spec is EPISODES] == ["pair0/glocal/episodes",
+                                                                  "/lab/pair1/glocal/episodes"]
+    assert {name for spec, name in names_ if spec is TF} == {"pair0/tf", "/lab/pair1/tf"}

@@ -30,7 +30,7 @@ from pathlib import Path
 from typing import Callable
 
 from glocal_app.benches.learner import BATCH_SIZE, INITIAL_POLICY, SETTLE_STEPS, TASK, LearnerNodeGoals, warmup_steps
-from glocal_app.processes import FOXGLOVE_HOST, FOXGLOVE_NODE, NodeProcess, isolated_environment
+from glocal_app.processes import FOXGLOVE_HOST, FOXGLOVE_NODE, NodeProcess, isolated_environment, namespace_arguments
 from glocal_ros.domain import reserve_domain_id
 from node_common.runner import spinning_node
 
@@ -94,7 +94,7 @@ def run_foxglove_bench(num_envs: int, steps: int, pairs: int, log: Callable[[str
     work = Path(tempfile.mkdtemp(prefix="glocal-bench-foxglove-"))
     logs = work / "logs"
     env = isolated_environment(domain_id, logs)
-    namespace_args = ("-r", f"__ns:={NAMESPACE}")
+    namespace_args = namespace_arguments(NAMESPACE)
     rates: dict[str, list[float]] = {variant: [] for variant in VARIANTS}
     bridge_cpu: list[tuple[float, float]] = []
     processes: list[NodeProcess] = []

@@ -107,7 +107,7 @@ def scale_report(run_dir: Path, validate: Sequence[Path], pairs: Sequence[int], 
     model = fit_model(segments)
     predicted = predicted_segments(model, segments)
     errors = sorted(abs(p - s.seconds) / s.seconds for s, p in zip(segments, predicted) if s.seconds > 0)
-    lines = [f"# bench scale: the wall-clock of a run with K pairs and of the paper's grid", "",
+    lines = ["# bench scale: the wall-clock of a run with K pairs and of the paper's grid", "",
              f"Command: `{command}`  ",
              f"Fitted on `{run_dir}` ({run.config.strategy}, seed {run.config.seed}, {len(run.config.tasks)} tasks, "
              f"budget {run.config.step_budget:,} steps, S-bar {run.config.eval_episodes}; {len(run.entries)} calls "
