@@ -26,7 +26,13 @@ Pairs (``--pairs K``, K >= 2): K sims and K learners, pair i in
 ``<namespace>/pair<i>``, as ``processes.run_parameters`` plans them; the
 launch waits until the recorder listens to every pair's episodes, and the
 progress bar and the watchdog hear every pair (a stall names the pairs whose
-learner no longer answers).
+learner no longer answers). ``--remote-pairs R`` leaves the last R pairs to
+other hosts: the launch prints for each the ``glocal-ros pair`` command that
+starts it there (``serve_pair``) and waits for it.
+
+On the user's ROS_DOMAIN_ID other graphs may run: the launch first listens
+to the domain for a few seconds and refuses to start a node whose name, in
+its namespace, another graph already uses (``check_names_free``).
 
 A watchdog stops a hung run instead of letting it wait: when a node process
 ends before the curriculum does, or nothing moves for ``watchdog_sec``
