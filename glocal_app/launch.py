@@ -61,6 +61,7 @@ from typing import Callable, Iterator, Sequence
 import rclpy
 from glocal_interfaces.msg import CurriculumState, EpisodeRecord, TrainingProgress
 from glocal_interfaces.srv import ListPolicies
+from rclpy.node import Node
 from rclpy.signals import SignalHandlerOptions
 
 from glocal_app.arguments import EXIT_FAILED, EXIT_INTERRUPTED, EXIT_STALLED
@@ -70,7 +71,7 @@ from glocal_app.processes import (FoxgloveEndpoint, NodeProcess, check_foxglove_
                                    node_path, recorded_run_settings, remote_pair_indices, run_nodes, run_parameters,
                                    run_settings, split_node_path, PAIR_NAMESPACE, PAIR_NODES, STATE_FILE)
 from glocal_ros.curriculum.codes import STRATEGY_NAMES
-from glocal_ros.domain import choose_domain_id, domain_id_from_environment
+from glocal_ros.domain import Domain, choose_domain_id, domain_id_from_environment
 from glocal_ros.recording import message_counts
 from node_common import names, qos
 from node_common.runner import configure_discovery
@@ -83,7 +84,7 @@ DEFAULT_WATCHDOG_SEC = 60.0
 #: How much longer than the start-up timeout a launch waits for pairs started on other hosts (by hand).
 REMOTE_PAIR_WAIT_SEC = 600.0
 #: How long a launch on the user's ROS_DOMAIN_ID listens for the domain's nodes before it checks its names.
-DISCOVERY_SEC = 3.0
+DISCOVERY_SEC = 5.0
 LEARNER_PROBE_SEC = 5.0
 #: What the watchdog calls the curriculum's state: once heard, the run has started.
 CURRICULUM_HEARD = "curriculum state"
@@ -256,23 +257,8 @@ def launch(strategy: str, preset: str, seed: int, run_dir: Path, startup_timeout
         check_foxglove_endpoint(foxglove)
     remote = {PAIR_NAMESPACE.format(index) for index in remote_pair_indices(pairs, remote_pairs)}
     *graph, last = [path for path in run_nodes(foxglove, pairs) if split_node_path(path)[0] not in remote]
-    domain = choose_domain_id()
-    node = None
-    try:
-        if remote_pairs and not domain.from_environment:
-            raise ValueError(f"--remote-pairs {remote_pairs}: set ROS_DOMAIN_ID (the same on every host) and a "
-                             f"discovery that reaches them (ROS_AUTOMATIC_DISCOVERY_RANGE=SUBNET or a Fast DDS "
-                             f"discovery server)")
-        node = launcher_node(domain.domain_id, namespace)
-        if domain.from_environment:  # a free domain has no other graph
-            check_names_free(node, [full_node_name(namespace, path) for path in (*graph, last)])
-        resumed = claim_run_dir(run_dir, run_settings(strategy, preset, seed, step_budget, learner_profile, pairs))
-    except ValueError:
-        if node is not None:
-            node.destroy_node()
-            rclpy.try_shutdown()
-        domain.close()
-        raise
+    settings = run_settings(strategy, preset, seed, step_budget, learner_profile, pairs)
+    domain, node, resumed = open_run(run_dir, settings, namespace, (*graph, last), remote_pairs)
     logs = run_dir / "logs"
     bag = new_bag_path(run_dir)
     env = isolated_environment(domain.domain_id, logs, keep_discovery_range=domain.from_environment)
@@ -304,8 +290,7 @@ def launch(strategy: str, preset: str, seed: int, run_dir: Path, startup_timeout
             print(f"Foxglove: open a connection to {foxglove.url} (layout: assets/foxglove/glocal.json)", flush=True)
         for index in remote_pair_indices(pairs, remote_pairs):
             print(f"waiting for pair {index}: on its host, with this run directory at the same path, "
-                  f"ROS_DOMAIN_ID={domain.domain_id} glocal-ros pair --out {run_dir} --index {index}"
-                  + (f" --namespace {namespace}" if namespace else ""), flush=True)
+                  f"ROS_DOMAIN_ID={domain.domain_id} {pair_command(run_dir, index, namespace)}", flush=True)
         wait_for_recorder(node, started, startup_timeout + (REMOTE_PAIR_WAIT_SEC if remote_pairs else 0), pairs_here)
         curriculum = start(last)
         watchdog.started = time.monotonic()
@@ -328,6 +313,36 @@ def launch(strategy: str, preset: str, seed: int, run_dir: Path, startup_timeout
     if report:
         write_run_report([run_dir], run_dir / "report")
     return exit_code
+
+
+def open_run(run_dir: Path, settings: dict[str, object], namespace: str, planned: Sequence[str],
+             remote_pairs: int = 0) -> tuple[Domain, Node, bool]:
+    """The run's domain (``choose_domain_id``), the launcher's node on it, and whether the run resumes, once
+    ``run_dir`` is claimed for ``settings``. ``ValueError``, with nothing claimed or left open, for remote
+    pairs without the user's ROS_DOMAIN_ID, a node of ``planned`` (``node_path``s) that another graph on the
+    user's domain already runs, or a directory of another run."""
+    domain = choose_domain_id()
+    node = None
+    try:
+        if remote_pairs and not domain.from_environment:
+            raise ValueError(f"--remote-pairs {remote_pairs}: set ROS_DOMAIN_ID (the same on every host) and a "
+                             f"discovery that reaches them (ROS_AUTOMATIC_DISCOVERY_RANGE=SUBNET or a Fast DDS "
+                             f"discovery server)")
+        node = launcher_node(domain.domain_id, namespace)
+        if domain.from_environment:  # a free domain has no other graph
+            check_names_free(node, [full_node_name(namespace, path) for path in planned])
+        return domain, node, claim_run_dir(run_dir, settings)
+    except ValueError:
+        if node is not None:
+            node.destroy_node()
+            rclpy.try_shutdown()
+        domain.close()
+        raise
+
+
+def pair_command(run_dir: Path, index: int, namespace: str = "") -> str:
+    """The command that starts pair ``index`` of the run in ``run_dir`` on another host (``serve_pair``)."""
+    return f"glocal-ros pair --out {run_dir} --index {index}" + (f" --namespace {namespace}" if namespace else "")
 
 
 def full_node_name(namespace: str, path: str) -> str:
