@@ -219,3 +219,13 @@ def test_a_pool_whose_every_learner_is_away_ends_the_run(tmp_path):
     with pytest.raises(Gone, match="not back yet"):
         run_strategy(the_run)
     assert leaving.watches == 1
+
+
+def test_the_strategies_that_overlap_calls_are_the_ones_launch_starts_several_pairs_for():
+    """``processes.PARALLEL_STRATEGIES`` (stdlib-only, so not imported from here) names exactly the strategies
+    that, given parallel_locals and two learners, ever have two calls out at once."""
+    from glocal_app.processes import PARALLEL_STRATEGIES
+    from glocal_ros.curriculum.codes import STRATEGY_NAMES
+
+    overlapping = {strategy for strategy in STRATEGY_NAMES if parallel_run(2, strategy=strategy)[3].overlaps}
+    assert overlapping == set(PARALLEL_STRATEGIES)
