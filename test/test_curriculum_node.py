@@ -78,28 +78,6 @@ def test_unknown_settings_are_refused(graph, tmp_path, params, message):
     assert message in node.log()
 
 
-def test_parallel_locals_over_two_pairs_in_their_namespaces(graph, tmp_path):
-    """The module's pair (root namespace) and a second in /pair1, sharing one policy store: GloCAL's
-    local tasks go to both, and the journal says which pair answered each call."""
-    from glocal_app.processes import namespace_arguments
-
-    policies = graph[1].log_path.parent / "policies"
-    second = [NodeProcess("sim_node", tmp_path, params_file=SMOKE, cwd=REPO, extra_args=namespace_arguments("/pair1")),
-              NodeProcess("learner_node", tmp_path, {"policy_dir": str(policies)}, params_file=SMOKE, cwd=REPO,
-                          extra_args=namespace_arguments("/pair1"))]
-    try:
-        node = curriculum(tmp_path, "glocal", parallel_locals=True, learner_namespaces="/,pair1")
-        wait_until(lambda: node.process.poll() is not None, 480, "the run over two pairs", processes=graph + second)
-        assert node.process.returncode == 0, node.log()
-    finally:
-        for process in second:
-            process.stop()
-    entries = [json.loads(line) for line in (tmp_path / "state" / "journal.jsonl").read_text().splitlines()]
-    assert entries[0]["config"]["parallel_locals"] is True
-    assert all("key" in entry and entry["learner"] in (0, 1) for entry in entries[1:])
-    assert {entry["learner"] for entry in entries[1:]} == {0, 1}, entries
-
-
 def test_learner_namespaces_are_a_list_of_distinct_namespaces():
     from curriculum_node.curriculum_node import learner_namespace_list
 
