@@ -393,6 +393,8 @@ def serve_pair(run_dir: Path, index: int, namespace: str = "") -> int:
     logs = run_dir / "logs"
     env = isolated_environment(domain_id, logs, keep_discovery_range=True)
     params_file = preset_file(str(settings["preset"]))
+    # Set, not inherited, as for the launcher (``launcher_node``): a background job inherits SIGINT ignored.
+    signal.signal(signal.SIGINT, signal.default_int_handler)
     signal.signal(signal.SIGTERM, signal.default_int_handler)
     started: list[NodeProcess] = []
     exit_code = EXIT_FAILED

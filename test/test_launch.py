@@ -274,7 +274,7 @@ def test_a_run_of_two_pairs_one_started_as_on_another_host_records_every_pair_an
         assert f"ROS_DOMAIN_ID={domain_id} glocal-ros pair --out {run_dir} --index 1" in output
         assert pair.poll() is None, "the pair serves until Ctrl-C"
         pair.send_signal(signal.SIGINT)
-        assert pair.wait(timeout=60) == 0, pair.stdout.read()
+        assert pair.wait(timeout=180) == 0, pair.stdout.read()
     finally:
         for process in (launcher, pair):
             if process is not None and process.poll() is None:
