@@ -257,7 +257,11 @@ class RecorderNode(Node):
         logger.info(f"closed {self.writer.path}: {counts or 'no messages'}")
         for topic, tracker in self.episode_seqs.items():
             check = tracker.result()
-            (logger.info if check.ok else logger.warning)(f"{topic}: {check.summary()}")
+            # Two calls, not one picked per topic: rclpy refuses one call site logging at two severities.
+            if check.ok:
+                logger.info(f"{topic}: {check.summary()}")
+            else:
+                logger.warning(f"{topic}: {check.summary()}")
 
 
 def pair_namespace_list(text: str) -> list[str]:

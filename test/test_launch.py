@@ -259,8 +259,9 @@ def test_a_run_of_two_pairs_one_started_as_on_another_host_records_every_pair_an
     run_dir = tmp_path / "run"
     command = [*CLI, "launch", "--preset", "smoke", "--seed", "5", "--out", str(run_dir), "--pairs", "2",
                "--remote-pairs", "1"]
+    # Each in a session of its own, so that a failed test stops the nodes they started too (killpg).
     launcher = subprocess.Popen(command, stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True, cwd=REPO,
-                                env=env)
+                                env=env, start_new_session=True)
     pair = None
     try:
         deadline = time.monotonic() + 120
@@ -268,7 +269,7 @@ def test_a_run_of_two_pairs_one_started_as_on_another_host_records_every_pair_an
             assert launcher.poll() is None and time.monotonic() < deadline, "the launch claimed no run directory"
             time.sleep(0.2)
         pair = subprocess.Popen([*CLI, "pair", "--out", str(run_dir), "--index", "1"], stdout=subprocess.PIPE,
-                                stderr=subprocess.STDOUT, text=True, cwd=REPO, env=env)
+                                stderr=subprocess.STDOUT, text=True, cwd=REPO, env=env, start_new_session=True)
         output, _ = launcher.communicate(timeout=600)
         assert launcher.returncode == 0, output
         assert f"ROS_DOMAIN_ID={domain_id} glocal-ros pair --out {run_dir} --index 1" in output
@@ -278,7 +279,11 @@ def test_a_run_of_two_pairs_one_started_as_on_another_host_records_every_pair_an
     finally:
         for process in (launcher, pair):
             if process is not None and process.poll() is None:
-                process.kill()
+                os.killpg(process.pid, signal.SIGINT)  # stops its nodes as Ctrl-C does
+                try:
+                    process.wait(timeout=60)
+                except subprocess.TimeoutExpired:
+                    os.killpg(process.pid, signal.SIGKILL)
 
     assert json.loads((run_dir / "run.json").read_text())["pairs"] == 2
     entries = [json.loads(line) for line in (run_dir / "curriculum" / "journal.jsonl").read_text().splitlines()[1:]]

@@ -130,3 +130,23 @@ def test_a_recorder_of_several_pairs_records_each_pairs_topics_under_its_namespa
     assert [name for spec, name in names_ if spec is EPISODES] == ["pair0/glocal/episodes",
                                                                   "/lab/pair1/glocal/episodes"]
     assert {name for spec, name in names_ if spec is TF} == {"pair0/tf", "/lab/pair1/tf"}
+
+
+def test_a_recorder_of_two_pairs_checks_each_pairs_episodes_and_ends_cleanly_when_one_has_a_gap(
+        start_node, ros_node, tmp_path):
+    bag = tmp_path / "bag"
+    recorder = start_node("recorder_node", output=str(bag), pair_namespaces="pair0,pair1", flush_interval_sec=0.2)
+    publishers = {pair: ros_node.create_publisher(EpisodeRecord, f"/{pair}/{names.EPISODES}", qos.EPISODES)
+                  for pair in ("pair0", "pair1")}
+    wait_until(lambda: all(p.get_subscription_count() for p in publishers.values()), 60,
+               "the recorder's subscriptions", processes=[recorder])
+    for pair, seqs in (("pair0", (0, 1, 2)), ("pair1", (0, 2))):
+        for seq in seqs:
+            publishers[pair].publish(episode(seq))
+    wait_until(lambda: messages_on_disk(bag / "bag.mcap") == 5, 60, "the 5 episodes on disk", processes=[recorder])
+    assert recorder.stop(signal.SIGINT) == 0, recorder.log()
+    log = recorder.log()
+    assert "/pair0/glocal/episodes: 3 episodes, seq 0..2; no gaps" in log, log
+    assert "/pair1/glocal/episodes: episode seq gap: 1 missing (got 2 after 0)" in log, log
+    assert "/pair1/glocal/episodes: 2 episodes" in log, log
+    assert message_counts(bag)["/pair1/glocal/episodes"] == 2
