@@ -83,7 +83,6 @@ class RosLearner:
         self.node = node
         self.timeout_sec = timeout_sec
         self.away_sec = timeout_sec if away_sec is None else away_sec
-        self.namespace = namespace
         self.on_feedback = on_feedback
         prefix = namespace.rstrip("/") + "/" if namespace else ""
         self._evaluate = node.create_client(Evaluate, prefix + names.LEARNER_EVALUATE, callback_group=group)
@@ -95,14 +94,13 @@ class RosLearner:
         self.results_asked_again = 0  # the goal ended, its result response did not come
         self.calls_sent_again = 0  # an Evaluate or CopyPolicy whose learner left before answering
 
-    def wait_for_learner(self, timeout_sec: float | None = None) -> None:
-        """Block until the learner's services and action are in the graph (``timeout_sec``, default the
-        learner's; ``ServiceCallError`` after it)."""
-        timeout_sec = self.timeout_sec if timeout_sec is None else timeout_sec
-        wait_for_service(self._evaluate, timeout_sec)
-        wait_for_service(self._copy, timeout_sec)
-        if not self._train.wait_for_server(timeout_sec=timeout_sec):
-            raise ServiceCallError(f"action {self.train_name} is not available after {timeout_sec:.0f} s")
+    def wait_for_learner(self) -> None:
+        """Block until the learner's services and action are in the graph (``ServiceCallError`` after
+        ``timeout_sec``)."""
+        wait_for_service(self._evaluate, self.timeout_sec)
+        wait_for_service(self._copy, self.timeout_sec)
+        if not self._train.wait_for_server(timeout_sec=self.timeout_sec):
+            raise ServiceCallError(f"action {self.train_name} is not available after {self.timeout_sec:.0f} s")
 
     def wait_until_ready(self) -> None:
         """Block until the learner is in the graph (within ``timeout_sec``) and runs no goal: one sent by a

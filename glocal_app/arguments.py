@@ -31,8 +31,8 @@ def name_list(text: str) -> list[str]:
     return [name.strip() for name in text.split(",") if name.strip()]
 
 
-def seed_list(text: str) -> list[int]:
-    """An argparse type: comma-separated non-negative integer seeds."""
+def number_list(text: str) -> list[int]:
+    """An argparse type: comma-separated non-negative integers (seeds, pair counts, ...)."""
     items = [item.strip() for item in text.split(",")]
     if not all(item.isdigit() for item in items):
         raise argparse.ArgumentTypeError(f"{text!r}: expected comma-separated non-negative integers, e.g. 0,1,2")
@@ -71,7 +71,7 @@ def add_experiment_arguments(parser: argparse.ArgumentParser, preset: str) -> No
     """What ``experiment`` and ``bench curriculum`` share: which runs, at which preset and budget."""
     parser.add_argument("--strategies", type=name_list, default=list(STRATEGY_NAMES),
                         help=f"comma-separated, of {', '.join(STRATEGY_NAMES)} (default: all)")
-    parser.add_argument("--seeds", type=seed_list, default=[0, 1, 2], help="comma-separated (default: 0,1,2)")
+    parser.add_argument("--seeds", type=number_list, default=[0, 1, 2], help="comma-separated (default: 0,1,2)")
     parser.add_argument("--preset", default=preset, help=f"a parameter file of assets/params (default: {preset})")
     parser.add_argument("--budget", type=count(1), default=None, metavar="STEPS",
                         help="training steps of every run, instead of the preset's step_budget")

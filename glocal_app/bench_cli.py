@@ -16,7 +16,7 @@ from glocal_app.arguments import (
     add_profile_argument,
     command_line,
     count,
-    seed_list,
+    number_list,
 )
 from glocal_app.benches import cost as cost_bench
 from glocal_app.benches.curriculum import BENCH_PRESET, DEFAULT_OUT, DEFAULT_RESULTS
@@ -222,13 +222,6 @@ def cmd_bench_scale(args: argparse.Namespace) -> int:
                               args.out)
 
 
-def _number_list(text: str) -> list[int]:
-    try:
-        return [int(part) for part in text.split(",")]
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"expected comma-separated whole numbers, got {text!r}") from None
-
-
 def _add_rate_arguments(parser: argparse.ArgumentParser, envs: str, steps: int) -> None:
     """The env counts, timed steps and rounds of a bench that times SAC learning (learner, backends)."""
     parser.add_argument("--envs", default=envs, help="comma-separated env counts N")
@@ -239,7 +232,7 @@ def _add_rate_arguments(parser: argparse.ArgumentParser, envs: str, steps: int) 
 
 def _add_cost_goal_arguments(command: argparse.ArgumentParser, default_envs: int) -> None:
     """What decides a cost map's goals, and where they are kept: ``bench cost``'s and ``bench stones``'."""
-    command.add_argument("--seeds", type=seed_list, default=list(cost_bench.DEFAULT_SEEDS),
+    command.add_argument("--seeds", type=number_list, default=list(cost_bench.DEFAULT_SEEDS),
                          help=f"comma-separated goal seeds (default: {','.join(map(str, cost_bench.DEFAULT_SEEDS))})")
     command.add_argument("--step-budget", type=int, default=cost_bench.DEFAULT_STEP_BUDGET, metavar="STEPS",
                          help=f"the cap: training steps of a goal that does not pass B (default: "
@@ -385,8 +378,8 @@ def add_bench_commands(commands) -> None:
     bench_scale.add_argument("--validate", type=Path, nargs="+", default=[], metavar="RUN_DIR",
                              help="runs to predict from their own settings, K and answers, beside their measured "
                                   "wall-clock")
-    bench_scale.add_argument("--pairs", type=_number_list, default=[1, 2, 4, 8], help="K to predict (default 1,2,4,8)")
-    bench_scale.add_argument("--machines", type=_number_list, default=[1, 10, 40],
+    bench_scale.add_argument("--pairs", type=number_list, default=[1, 2, 4, 8], help="K to predict (default 1,2,4,8)")
+    bench_scale.add_argument("--machines", type=number_list, default=[1, 10, 40],
                              help="M for the paper's grid (default 1,10,40)")
     bench_scale.add_argument("--out", type=Path, default=Path("bench/results/scale.md"))
     bench_scale.set_defaults(func=cmd_bench_scale)

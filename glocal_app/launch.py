@@ -67,9 +67,10 @@ from rclpy.signals import SignalHandlerOptions
 from glocal_app.arguments import EXIT_FAILED, EXIT_INTERRUPTED, EXIT_STALLED
 from glocal_app.processes import (FoxgloveEndpoint, NodeProcess, check_foxglove_endpoint, check_pairs, check_run_dir,
                                    claim_run_dir, isolated_environment, namespace_arguments, new_bag_path,
-                                   normalize_namespace, pair_namespaces, preset_file, preset_parameters,
-                                   node_path, recorded_run_settings, remote_pair_indices, run_nodes, run_parameters,
-                                   run_settings, split_node_path, PAIR_NAMESPACE, PAIR_NODES, STATE_FILE)
+                                   node_namespace, node_path, normalize_namespace, pair_namespaces, preset_file,
+                                   preset_parameters, recorded_run_settings, remote_pair_indices, run_nodes,
+                                   run_parameters, run_settings, split_node_path, PAIR_NAMESPACE, PAIR_NODES,
+                                   STATE_FILE)
 from glocal_ros.curriculum.codes import STRATEGY_NAMES
 from glocal_ros.domain import Domain, choose_domain_id, domain_id_from_environment
 from glocal_ros.recording import message_counts
@@ -275,10 +276,8 @@ def launch(strategy: str, preset: str, seed: int, run_dir: Path, startup_timeout
     plan = run_parameters(strategy, seed, run_dir, bag, use_sim_time, step_budget, learner_profile, foxglove, pairs)
 
     def start(path: str) -> NodeProcess:
-        pair, executable = split_node_path(path)
-        where = normalize_namespace(f"{namespace}/{pair}")
-        process = NodeProcess(executable, logs, plan[path], params_file, env, extra_args=namespace_arguments(where),
-                              name=path)
+        process = NodeProcess(split_node_path(path)[1], logs, plan[path], params_file, env, name=path,
+                              extra_args=namespace_arguments(node_namespace(namespace, path)))
         started.append(process)
         return process
 
@@ -347,8 +346,7 @@ def pair_command(run_dir: Path, index: int, namespace: str = "") -> str:
 
 def full_node_name(namespace: str, path: str) -> str:
     """The fully qualified name of the plan's node ``path`` in a run under ``namespace``: ``/robot1/pair1/sim_node``."""
-    pair, executable = split_node_path(path)
-    return f"{normalize_namespace(f'{namespace}/{pair}').rstrip('/')}/{executable}"
+    return f"{node_namespace(namespace, path).rstrip('/')}/{split_node_path(path)[1]}"
 
 
 def check_names_free(node, planned: Sequence[str], discovery_sec: float = DISCOVERY_SEC) -> None:
@@ -402,7 +400,7 @@ def serve_pair(run_dir: Path, index: int, namespace: str = "") -> int:
         for executable in PAIR_NODES:
             path = node_path(pair, executable)
             started.append(NodeProcess(executable, logs, plan[path], params_file, env, name=path,
-                                       extra_args=namespace_arguments(normalize_namespace(f"{namespace}/{pair}"))))
+                                       extra_args=namespace_arguments(node_namespace(namespace, path))))
         print(f"pair {index} of {run_dir} on ROS_DOMAIN_ID {domain_id}: {', '.join(p.name for p in started)}; "
               f"logs in {logs}; Ctrl-C stops it", flush=True)
         while all(process.running for process in started):

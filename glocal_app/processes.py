@@ -128,6 +128,12 @@ def split_node_path(path: str) -> tuple[str, str]:
     return namespace, node
 
 
+def node_namespace(namespace: str, path: str) -> str:
+    """The namespace the plan's node ``path`` runs in, in a run under ``namespace`` (normalized; "" for none):
+    ``/robot1/pair1`` for ``pair1/sim_node`` under ``robot1``."""
+    return normalize_namespace(f"{namespace}/{split_node_path(path)[0]}")
+
+
 def run_nodes(foxglove: FoxgloveEndpoint | None = None, pairs: int = 1) -> tuple[str, ...]:
     """The nodes of a run (``node_path``) in the order they start: the bridge first when the run has a Foxglove
     endpoint, the recorder, each pair's sim and learner, the curriculum last."""

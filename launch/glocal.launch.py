@@ -59,8 +59,8 @@ from launch_ros.actions import Node
 
 from glocal_app.processes import (FOXGLOVE_HOST, FOXGLOVE_PORT, FoxgloveEndpoint, check_foxglove_endpoint,
                                   check_pairs, claim_run_dir, default_run_dir, namespace_remappings, new_bag_path,
-                                  normalize_namespace, preset_file, run_nodes as planned_nodes, run_parameters,
-                                  run_settings, split_node_path)
+                                  node_namespace, normalize_namespace, preset_file, run_nodes as planned_nodes,
+                                  run_parameters, run_settings, split_node_path)
 
 PACKAGE = "glocal_ros"
 #: As glocal_ros.curriculum.codes.STRATEGY_NAMES (not imported: see the docstring; a test compares them).
@@ -119,10 +119,9 @@ def run_nodes(context, *args, **kwargs) -> list:
                           learner_profile=learner_profile, foxglove=foxglove, pairs=pairs)
 
     def node(path: str) -> Node:
-        pair, executable = split_node_path(path)
-        where = normalize_namespace(f"{namespace}/{pair}")
+        where = node_namespace(namespace, path)
         return Node(
-            package=PACKAGE, executable=executable, output="screen",
+            package=PACKAGE, executable=split_node_path(path)[1], output="screen",
             # Relative: an including launch file's PushRosNamespace comes in front of it.
             namespace=where.lstrip("/") or None,
             parameters=[str(params_file), plan[path]],
