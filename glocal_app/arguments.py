@@ -39,6 +39,15 @@ def number_list(text: str) -> list[int]:
     return [int(item) for item in items]
 
 
+def profile_list(text: str) -> list[str]:
+    """An argparse type: comma-separated learner profiles (``learner_node.profiles``)."""
+    names = [name.strip() for name in text.split(",")]
+    unknown = [name for name in names if name not in PROFILES]
+    if unknown:
+        raise argparse.ArgumentTypeError(f"unknown learner profile {unknown[0]!r}: choose from {', '.join(PROFILES)}")
+    return names
+
+
 def count(minimum: int):
     """An argparse type: an integer of at least ``minimum``."""
     def parse(text: str) -> int:

@@ -17,6 +17,7 @@ from glocal_app.arguments import (
     command_line,
     count,
     number_list,
+    profile_list,
 )
 from glocal_app.benches import cost as cost_bench
 from glocal_app.benches.curriculum import BENCH_PRESET, DEFAULT_OUT, DEFAULT_RESULTS
@@ -26,6 +27,7 @@ from glocal_app.benches.transfer import (
     TRANSFER_TASKS,
     TransferSettings,
 )
+from glocal_ros.sim_contract import DEFAULT_EVAL_ENVS
 from glocal_ros.tasks import parse_task_list
 from learner_node.profiles import DEFAULT_PROFILE, PROFILES
 from learner_node.sac_settings import DEFAULT_NETWORK, FINE_TUNING_RECIPES, NETWORKS
@@ -54,9 +56,16 @@ def cmd_bench_learner(args: argparse.Namespace) -> int:
 
     env_counts = [int(n) for n in args.envs.split(",")]
     rows = run_learner_bench(env_counts, args.steps, args.rounds, learner_node=not args.no_learner_node,
-                             profile=args.profile)
+                             profiles=args.profiles)
     report = learner_bench_report(rows, command_line(), args.steps, args.rounds)
     return write_bench_report(report, args.out)
+
+
+def cmd_bench_eval(args: argparse.Namespace) -> int:
+    from glocal_app.benches.evaluation import eval_bench_report, run_eval_bench
+
+    row = run_eval_bench(args.envs, args.eval_envs, args.episodes, args.rounds, profile=args.profile)
+    return write_bench_report(eval_bench_report(row, command_line(), args.rounds, args.profile), args.out)
 
 
 def cmd_bench_backends(args: argparse.Namespace) -> int:
@@ -110,7 +119,7 @@ def cmd_bench_transfer(args: argparse.Namespace) -> int:
                                   args.out)
     seeds = [int(seed) for seed in args.seeds.split(",")]
     recipes, tasks, priors = args.recipes.split(","), args.tasks.split(","), args.priors.split(",")
-    arms = dict(priors=priors, prior_store=args.prior_store, profiles=args.profiles.split(","))
+    arms = dict(priors=priors, prior_store=args.prior_store, profiles=args.profiles)
     goals = (run_transfer_graph(recipes, tasks, seeds, settings, **arms) if args.graph
              else run_transfer_bench(recipes, tasks, seeds, settings, args.jobs, **arms))
     report = transfer_bench_report(goals, command, settings, args.jobs, args.graph)
@@ -289,8 +298,20 @@ def add_bench_commands(commands) -> None:
     bench_learner.add_argument("--no-learner-node", action="store_true",
                                help="leave out the learner_node process (its Train action) column")
     bench_learner.add_argument("--out", type=Path, default=Path("bench/results/learner.md"))
-    add_profile_argument(bench_learner)
+    bench_learner.add_argument("--profiles", type=profile_list, default=list(PROFILES),
+                               help="comma-separated learner profiles, each measured on its own prior "
+                                    f"(default: all, {','.join(PROFILES)})")
     bench_learner.set_defaults(func=cmd_bench_learner)
+    bench_eval = bench_commands.add_parser("eval", help="evaluation env steps/s through learner_node beside the "
+                                           "sim's envs stepped alone on all its workers")
+    bench_eval.add_argument("--envs", type=count(1), default=4, help="the sim's training envs (default 4)")
+    bench_eval.add_argument("--eval-envs", type=count(1), default=DEFAULT_EVAL_ENVS,
+                            help=f"the sim's evaluation envs (default {DEFAULT_EVAL_ENVS})")
+    bench_eval.add_argument("--episodes", type=count(1), default=25, help="episodes per task (default 25)")
+    bench_eval.add_argument("--rounds", type=count(1), default=3, help="alternating rounds; medians reported")
+    bench_eval.add_argument("--out", type=Path, default=Path("bench/results/eval.md"))
+    add_profile_argument(bench_eval)
+    bench_eval.set_defaults(func=cmd_bench_eval)
     bench_backends = bench_commands.add_parser("backends", help="SAC env steps/s of stable-baselines3 (torch) and "
                                                "SBX (JAX), side by side: how the learner's backend was chosen")
     _add_rate_arguments(bench_backends, envs="1,4", steps=2000)
@@ -300,7 +321,7 @@ def add_bench_commands(commands) -> None:
     transfer_defaults = TransferSettings()
     bench_transfer = bench_commands.add_parser(
         "transfer", help="fine-tuning the A0 prior on other objects: steps to B and collapses, recipe by recipe")
-    bench_transfer.add_argument("--profiles", default=DEFAULT_PROFILE,
+    bench_transfer.add_argument("--profiles", type=profile_list, default=[DEFAULT_PROFILE],
                                 help=f"comma-separated learner profiles, of {', '.join(PROFILES)}")
     bench_transfer.add_argument("--recipes", default=PROFILE_RECIPE,
                                 help=f"comma-separated fine-tuning recipes: {PROFILE_RECIPE} (each profile's own), "

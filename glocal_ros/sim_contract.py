@@ -28,6 +28,9 @@ UNSEEDED = -1
 #: T: an episode's steps before it is truncated, unless the sim is told otherwise (sim_node ``max_steps``;
 #: curriculum_node's ``max_episode_steps`` must say the same).
 DEFAULT_EPISODE_STEPS = 50
+#: The sim's envs of evaluation (sim_node ``eval_envs``): eight a worker on two cores, where a step's physics
+#: outweighs its round trip (``glocal-ros bench eval``).
+DEFAULT_EVAL_ENVS = 16
 
 
 @dataclass
@@ -67,14 +70,15 @@ class EpisodeLog:
 
 @dataclass
 class StepBatch:
-    """What one lockstep step of all N envs returns (StepEnvs' response, as numpy)."""
+    """What one lockstep step of the N envs (or of those it named) returns (StepEnvs' response, as numpy): one
+    row per stepped env, in the request's order."""
 
-    observations: np.ndarray  # (N, obs_dim) after automatic resets
-    rewards: np.ndarray  # (N,)
-    terminated: np.ndarray  # (N,) bool
-    truncated: np.ndarray  # (N,) bool
-    is_success: np.ndarray  # (N,) bool
-    terminal_observations: np.ndarray  # (N, obs_dim), zero rows where no episode ended
+    observations: np.ndarray  # (stepped, obs_dim) after automatic resets
+    rewards: np.ndarray  # (stepped,)
+    terminated: np.ndarray  # (stepped,) bool
+    truncated: np.ndarray  # (stepped,) bool
+    is_success: np.ndarray  # (stepped,) bool
+    terminal_observations: np.ndarray  # (stepped, obs_dim), zero rows where no episode ended
     tasks: list[str]
     finished: list[EpisodeLog]  # episodes that ended; empty through ROS (they go to the record instead)
 
@@ -95,13 +99,13 @@ class BatchStepper(Protocol):
 
     def step(
         self, actions: np.ndarray, next_tasks: Sequence[str] = (), phase: int = PHASE_TRAIN,
-        policy_name: str = "", global_step: int = 0,
+        policy_name: str = "", global_step: int = 0, env_indices: Sequence[int] = (),
     ) -> StepBatch:
-        """Step every env once with its row of ``actions``."""
+        """Step every env (or those of ``env_indices``; the others wait) once with its row of ``actions``."""
 
     def start_step(
         self, actions: np.ndarray, next_tasks: Sequence[str] = (), phase: int = PHASE_TRAIN,
-        policy_name: str = "", global_step: int = 0,
+        policy_name: str = "", global_step: int = 0, env_indices: Sequence[int] = (),
     ) -> FinishStep:
         """``step`` in two halves, so that the caller works while the envs step.
 

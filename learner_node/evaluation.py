@@ -4,10 +4,18 @@ ROS-free: ``evaluate`` drives any ``glocal_ros.sim_contract.BatchStepper``
 (the sim's in-process batch, or the sim node's client), so it is tested
 against real envs in-process and runs over the graph unchanged.
 
-Every requested episode is one job; all envs work through the job queue at
-once, each env holding the job it will start when its current episode ends.
-Episodes started after the queue ran dry are left running and reach the
-record as ``interrupted`` at the next reset: they are never counted.
+Every requested episode is one job. The envs take the jobs in turn: a
+sim step carries only the envs that run a job (``env_indices``), so envs
+beyond the jobs wait and cost nothing, and each env holds the job it starts
+when its current episode ends (the sim starts it at once). The envs of the
+first jobs are spread over the batch (``spread``), so that an evaluation of
+fewer episodes than envs still keeps each worker process of a sim busy.
+
+Seeds: with ``seed`` s, the first reset puts every env on the first task
+and env k's episode gets s + k; the envs whose first job is of another task
+are reset to it, the k-th of them with s + N + k (N envs); later episodes
+continue each env's random stream. So a seeded evaluation is the same
+episodes on the same sim, whoever runs it.
 """
 
 from __future__ import annotations
@@ -47,30 +55,37 @@ def evaluate(
         raise ValueError("no task to evaluate")
     jobs = deque(task for task in tasks for _ in range(episodes))
     successes = {task: 0 for task in tasks}
-    remaining = len(jobs)
-
-    # Every env starts on the first task (the batch size is known from the reset);
-    # an env beyond that task's jobs runs one uncounted episode before its first job.
-    observations, _ = envs.reset((), [tasks[0]], [] if seed is None else [seed], PHASE_EVAL, policy_name)
+    seeds = [] if seed is None else [seed]
+    observations, _ = envs.reset((), [tasks[0]], seeds, PHASE_EVAL, policy_name)
     num_envs = len(observations)
-    running = [tasks[0]] * num_envs
-    counted = []
-    for _ in range(num_envs):
-        counted.append(bool(jobs) and jobs[0] == tasks[0])
-        if counted[-1]:
-            jobs.popleft()
-    # The job each env starts when its current episode ends ("" = none left: an uncounted extra).
-    reserved = [jobs.popleft() if jobs else "" for _ in range(num_envs)]
+    running: dict[int, str] = {}  # env -> task of the counted episode it runs
+    for env in spread(num_envs)[:len(jobs)]:
+        running[env] = jobs.popleft()
+    other_task = sorted(env for env, task in running.items() if task != tasks[0])
+    if other_task:
+        restarted, _ = envs.reset(other_task, [running[env] for env in other_task],
+                                  [] if seed is None else [seed + num_envs], PHASE_EVAL, policy_name)
+        observations[other_task] = restarted
+    reserved = {env: jobs.popleft() if jobs else "" for env in sorted(running)}  # the job after this one
 
-    while remaining > 0:
-        result = envs.step(policy(observations), reserved, PHASE_EVAL, policy_name, global_step)
-        ended = np.flatnonzero(result.terminated | result.truncated)
-        for i in ended:
-            if counted[i]:
-                remaining -= 1
-                successes[running[i]] += int(result.is_success[i])
-            counted[i] = bool(reserved[i])
-            running[i] = reserved[i] or running[i]
-            reserved[i] = jobs.popleft() if jobs else ""
-        observations = result.observations
+    while running:
+        stepped = sorted(running)
+        result = envs.step(policy(observations[stepped]), [reserved[env] for env in stepped], PHASE_EVAL,
+                           policy_name, global_step, stepped)
+        observations[stepped] = result.observations
+        for row in np.flatnonzero(result.terminated | result.truncated):
+            env = stepped[row]
+            successes[running[env]] += int(result.is_success[row])
+            if reserved[env]:
+                running[env], reserved[env] = reserved[env], jobs.popleft() if jobs else ""
+            else:
+                del running[env]
     return [Score(task, successes[task], episodes) for task in tasks]
+
+
+def spread(num_envs: int) -> list[int]:
+    """The env indices in an order that spreads any first k of them over the batch: by their bit-reversed
+    value (16 envs: 0, 8, 4, 12, 2, ...), so that k envs of a batch split into consecutive shares fall
+    into different shares."""
+    bits = max(1, (num_envs - 1).bit_length())
+    return sorted(range(num_envs), key=lambda index: int(f"{index:0{bits}b}"[::-1], 2))

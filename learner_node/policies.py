@@ -22,6 +22,25 @@ from learner_node.replay_buffer import Experience
 RANDOM_POLICY = "random"
 
 
+def deterministic_actions(policy) -> BatchPolicy:
+    """The SAC ``policy``'s deterministic actions, the numbers SB3's ``predict`` gives, from one compiled call.
+
+    ``predict`` checks and converts its input and output around the network, which on a batch of a few
+    envs costs more than the network itself; here the actor's mode is computed and then clipped and
+    scaled to the action space as ``predict`` does. The actor is read at each call, so a policy that
+    trains acts with its newest weights.
+    """
+    from sbx.common.policies import BaseJaxPolicy
+
+    shape = policy.action_space.shape
+
+    def act(observations: np.ndarray) -> np.ndarray:
+        actions = np.asarray(BaseJaxPolicy.select_action(policy.actor_state, observations)).reshape((-1, *shape))
+        return policy.unscale_action(np.clip(actions, -1, 1))
+
+    return act
+
+
 class PolicyExists(ValueError):
     """A policy of that name exists already: nothing was written."""
 
@@ -54,8 +73,7 @@ class PolicyRegistry:
             return lambda observations: rng.uniform(
                 -1.0, 1.0, size=(len(observations), ACTION_DIM)
             ).astype(np.float32)
-        model = self.model(name)
-        return lambda observations: model.predict(observations, deterministic=True)[0]
+        return deterministic_actions(self.model(name).policy)
 
     def model(self, name: str):
         """The SAC model of a stored policy, loaded again only when its file changed."""

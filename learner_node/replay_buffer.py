@@ -1,4 +1,8 @@
-"""Compact checkpoints of an SB3 replay buffer (only the filled rows), and experience.
+"""Compact files of an SB3 replay buffer (only the filled rows), and experience.
+
+A Train goal's buffer is a ``learner_node.updates.TransitionRing``; the SB3
+buffers here are those of ``glocal-ros train-prior``, which trains with SB3's
+own ``learn``.
 
 SB3's ``save_replay_buffer`` pickles the whole preallocated buffer (about
 110 MB at 200k transitions of this env) however little of it is used; a
@@ -22,22 +26,22 @@ import numpy as np
 
 from glocal_ros.files import read_npz
 
-_ARRAYS = ("observations", "next_observations", "actions", "rewards", "dones", "timeouts")
+TRANSITION_ARRAYS = ("observations", "next_observations", "actions", "rewards", "dones", "timeouts")
 
-#: Transitions, one row each: the arrays of ``_ARRAYS`` with the env axis folded into the first.
+#: Transitions, one row each: the arrays of ``TRANSITION_ARRAYS`` with the env axis folded into the first.
 Experience = dict[str, np.ndarray]
 
 
 def save_replay_buffer(buffer, stream: BinaryIO) -> None:
     filled = buffer.buffer_size if buffer.full else buffer.pos
-    arrays = {name: getattr(buffer, name)[:filled] for name in _ARRAYS}
+    arrays = {name: getattr(buffer, name)[:filled] for name in TRANSITION_ARRAYS}
     np.savez(stream, pos=buffer.pos, full=buffer.full, **arrays)
 
 
 def load_replay_buffer(buffer, path: Path) -> bool:
     """Fill ``buffer`` from ``path``; False (buffer left empty) when the shapes differ, e.g. another N.
     ``ValueError`` naming ``path`` when it is not a whole buffer file."""
-    saved = read_arrays(path, (*_ARRAYS, "pos", "full"))
+    saved = read_arrays(path, (*TRANSITION_ARRAYS, "pos", "full"))
     observations = saved["observations"]
     if observations.ndim < 1 or len(observations) > buffer.buffer_size \
             or observations.shape[1:] != buffer.observations.shape[1:]:
@@ -45,7 +49,7 @@ def load_replay_buffer(buffer, path: Path) -> bool:
     try:
         if saved["pos"].shape != () or saved["full"].shape != () or not 0 <= int(saved["pos"]) < buffer.buffer_size:
             raise ValueError("pos and full are not a position in the buffer and a flag")
-        for name in _ARRAYS:
+        for name in TRANSITION_ARRAYS:
             getattr(buffer, name)[:len(observations)] = saved[name]
     except (ValueError, TypeError) as error:  # arrays of other lengths or shapes than the observations'
         raise ValueError(f"{path}: {error}") from error
@@ -58,40 +62,16 @@ def recent_experience(buffer, count: int) -> Experience:
     rows = buffer.buffer_size if buffer.full else buffer.pos
     order = np.roll(np.arange(rows), -buffer.pos) if buffer.full else np.arange(rows)  # oldest row first
     keep = order[max(0, rows - -(-count // buffer.n_envs)):]
-    return {name: _flat(getattr(buffer, name)[keep])[-count:] for name in _ARRAYS}
-
-
-def add_experience(buffer, experience: Experience) -> int:
-    """Append ``experience`` to an SB3 replay buffer in rows of its ``n_envs``; returns the transitions added.
-
-    Whole rows only: up to ``n_envs - 1`` of the oldest transitions are left out. ``ValueError`` when the
-    transitions are of another observation or action shape than the buffer's.
-    """
-    observations = experience["observations"]
-    if (observations.shape[1:] != buffer.observations.shape[2:]
-            or experience["actions"].shape[1:] != buffer.actions.shape[2:]):
-        raise ValueError(f"experience of observations {observations.shape[1:]} and actions "
-                         f"{experience['actions'].shape[1:]} does not fit a buffer of "
-                         f"{buffer.observations.shape[2:]} and {buffer.actions.shape[2:]}")
-    rows = min(len(observations) // buffer.n_envs, buffer.buffer_size - buffer.pos)
-    used = rows * buffer.n_envs
-    for name in _ARRAYS:
-        values = experience[name][len(observations) - used:]
-        target = getattr(buffer, name)
-        target[buffer.pos:buffer.pos + rows] = values.reshape((rows, buffer.n_envs) + target.shape[2:])
-    buffer.pos += rows
-    buffer.full = buffer.full or buffer.pos == buffer.buffer_size
-    buffer.pos %= buffer.buffer_size
-    return used
+    return {name: _flat(getattr(buffer, name)[keep])[-count:] for name in TRANSITION_ARRAYS}
 
 
 def save_experience(experience: Experience, stream: BinaryIO) -> None:
-    np.savez_compressed(stream, **{name: experience[name] for name in _ARRAYS})
+    np.savez_compressed(stream, **{name: experience[name] for name in TRANSITION_ARRAYS})
 
 
 def load_experience(path: Path) -> Experience:
     """The transitions in the experience file ``path``; ``ValueError`` naming it when it is not one."""
-    experience = read_arrays(path, _ARRAYS)
+    experience = read_arrays(path, TRANSITION_ARRAYS)
     if any(values.ndim == 0 for values in experience.values()) or \
             len({len(values) for values in experience.values()}) != 1:
         raise ValueError(f"{path}: the arrays of the experience differ in length")

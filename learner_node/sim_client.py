@@ -57,18 +57,18 @@ class SimClient:
 
     def step(
         self, actions: np.ndarray, next_tasks: Sequence[str] = (), phase: int = PHASE_TRAIN, policy_name: str = "",
-        global_step: int = 0,
+        global_step: int = 0, env_indices: Sequence[int] = (),
     ) -> StepBatch:
-        return self.start_step(actions, next_tasks, phase, policy_name, global_step)()
+        return self.start_step(actions, next_tasks, phase, policy_name, global_step, env_indices)()
 
     def start_step(
         self, actions: np.ndarray, next_tasks: Sequence[str] = (), phase: int = PHASE_TRAIN, policy_name: str = "",
-        global_step: int = 0,
+        global_step: int = 0, env_indices: Sequence[int] = (),
     ) -> FinishStep:
         """Send the step now; the returned function waits for its batch (the learner trains meanwhile)."""
         request = StepEnvs.Request(
-            actions=to_float32_field(actions), next_tasks=list(next_tasks), phase=phase,
-            policy_name=policy_name, global_step=int(global_step),
+            env_indices=[int(i) for i in env_indices], actions=to_float32_field(actions),
+            next_tasks=list(next_tasks), phase=phase, policy_name=policy_name, global_step=int(global_step),
         )
         wait = start_call(self._step, request, self.timeout_sec, checked=True)
 

@@ -5,8 +5,11 @@ client, or ``BatchedEnvs`` in-process for the bench and tests), and the goal's
 owner passes in what it needs to hear (progress), to say (stop) and to run
 between steps (evaluations others asked for).
 
-The loop is stable-baselines3's ``learn`` on a ``BatchVecEnv`` (``_Goal`` writes down the
-order of one step); around it:
+The loop is SAC's, written out in ``_Goal.collect`` on a ``BatchVecEnv``
+(``_Goal`` writes down the order of one step): stable-baselines3's
+``learn`` for SBX's SAC, less its host-side replay buffer and callbacks, with
+the buffer and the gradient steps in compiled code (``learner_node.updates``
+says what that replaces and what it changes); around it:
 - evaluation of ``task`` every ``eval_interval`` env steps and at the end,
   the paper's score (successes out of ``eval_episodes``, deterministic);
   learned means score > threshold (the paper's "above B"); a goal that
@@ -36,7 +39,7 @@ Choices:
   train one policy through many short goals.
 - Only training env steps count against the budget; evaluation steps do not
   (the paper counts training timesteps).
-- SB3 steps the N envs together, so a goal trains whole vector steps and
+- The N envs step together, so a goal trains whole vector steps and
   never passes its budget: it may stop up to N - 1 steps short of it
   (``steps_used`` says what it trained; the curriculum charges that).
 - ``episode_limit`` ends a goal at the vector step where that many training
@@ -44,6 +47,8 @@ Choices:
   episodes still running are cut, as at any goal's end.
 - The gradient steps of a vector step run while the sim computes the next
   one (``learner_node.updates``): SB3's updates, a step later.
+- A checkpoint's files are this loop's (``CHECKPOINT_FORMAT``): one of the
+  SB3 loop before it is refused, naming what differs, and never resumed.
 """
 
 from __future__ import annotations
@@ -58,8 +63,6 @@ from pathlib import Path
 from typing import Callable, Sequence
 
 import numpy as np
-from stable_baselines3.common.callbacks import BaseCallback
-
 from glocal_ros.curriculum.learner import PAPER_EVAL_EPISODES, EpisodeSummary, paper_threshold, passes_threshold
 from glocal_ros.files import atomic_write
 from glocal_ros.seeds import MAX_SEED, derived_seed
@@ -68,18 +71,20 @@ from glocal_ros.tasks import validate_tasks
 from learner_node.evaluation import BatchPolicy, Score, evaluate
 from learner_node.fine_tuning import goal_start_actor, start_fine_tuning
 from learner_node.model_files import load_model, write_model
-from learner_node.policies import RANDOM_POLICY, PolicyRegistry
+from learner_node.policies import RANDOM_POLICY, PolicyRegistry, deterministic_actions
 from learner_node.policy_store import PolicyRecord, check_name
-from learner_node.replay_buffer import add_experience, load_replay_buffer, recent_experience, save_replay_buffer
 from learner_node.profiles import DEFAULT_PROFILE, PROFILES, LearnerProfile
-from learner_node.sac_settings import SAC_KWARGS, FineTuning, seed_keys
-from learner_node.updates import OverlappedUpdates
+from learner_node.sac_settings import FineTuning, seed_keys
+from learner_node.updates import OverlappedUpdates, TransitionRing, sample_actions
 from learner_node.vec_env import BatchVecEnv, TaskCycle
 
 #: Largest step budget of one goal: the paper's whole run is 4M steps; a budget beyond this is a typo
 #: (or 2^64 - 1), and would train until cancelled.
 DEFAULT_MAX_STEP_BUDGET = 100_000_000
 CHECKPOINT_FILE = "checkpoint.json"
+#: What a checkpoint of this loop says it is: its buffer is a ``TransitionRing``'s file. The SB3 loop before
+#: wrote none (its buffer in rows of N envs, its minibatches from numpy's generator).
+CHECKPOINT_FORMAT = "compiled-loop-1"
 #: The files a checkpoint names, in its own folder; a ``.zip`` model is of the pickled format before, which
 #: ``load_model`` refuses saying so.
 _CHECKPOINT_FILES = {"model": re.compile(r"^model-[1-9][0-9]{0,17}\.(npz|zip)$"),
@@ -193,7 +198,7 @@ class Trainer:
         self.checkpoint_interval = checkpoint_interval
         self.progress_interval_sec = progress_interval_sec
         self.total_steps = 0  # training env steps over all goals, for the episode records
-        self._warm: tuple[str, str, object] | None = None  # (policy, model file, model) of the last goal
+        self._warm: tuple[str, str, object, TransitionRing] | None = None  # (policy, model file, model, buffer)
 
     @property
     def learner_key(self) -> dict:
@@ -238,8 +243,7 @@ class Trainer:
         """
         if name == RANDOM_POLICY or self.fine_tuning.new_task_inputs == "initial":
             return self.policies.load(name, seed)
-        policy = goal_start_actor(self.policies.model(name), self.fine_tuning, tasks)
-        return lambda observations: policy.predict(observations, deterministic=True)[0]
+        return deterministic_actions(goal_start_actor(self.policies.model(name), self.fine_tuning, tasks))
 
     def _mark_finished(self, folder: Path, spec: TrainSpec, state: _GoalState, model_file: str) -> None:
         """Replace the checkpoint by the goal's outcome: a client that lost the result may ask again."""
@@ -263,7 +267,7 @@ class Trainer:
         state = _GoalState(**finished["state"])
         return _outcome(state, True, f"finished before, not trained again: {state.steps_used} steps")
 
-    def _store(self, spec: TrainSpec, model, state: _GoalState) -> PolicyRecord:
+    def _store(self, spec: TrainSpec, model, ring: TransitionRing, state: _GoalState) -> PolicyRecord:
         parent = self.policies.record(spec.initial_policy)
         record = PolicyRecord(
             name=spec.output_policy, task=spec.task or ",".join(sorted(set(spec.episode_tasks))),
@@ -273,35 +277,37 @@ class Trainer:
             extra={"learned": state.learned, "threshold": spec.threshold, "eval_episodes": spec.eval_episodes},
         )
         experience = self.fine_tuning.experience
-        stored = self.policies.store.save(
-            model, record, recent_experience(model.replay_buffer, experience) if experience else None)
-        self._warm = (spec.output_policy, str(self.policies.store.root / stored.name / stored.model_file), model)
+        stored = self.policies.store.save(model, record, ring.recent(experience) if experience else None)
+        self._warm = (spec.output_policy, str(self.policies.store.root / stored.name / stored.model_file), model,
+                      ring)
         return stored
 
-    def _warm_model(self, spec: TrainSpec):
-        """The previous goal's model when ``spec`` continues it (``keep_replay_buffer``), else None."""
+    def _warm_model(self, spec: TrainSpec) -> tuple[object, TransitionRing] | None:
+        """The previous goal's model and buffer when ``spec`` continues it (``keep_replay_buffer``), else None."""
         store_path = str(self.policies.model_path(spec.initial_policy))
         if spec.keep_replay_buffer and self._warm and self._warm[:2] == (spec.initial_policy, store_path):
-            return self._warm[2]
+            return self._warm[2], self._warm[3]
         return None
 
 
 class _Goal:
     """One Train goal from its first step to its outcome: the state it owns and the order of a step.
 
-    The loop is SB3's ``learn``; each vector step runs, in this order:
-    1. ``at_step_start`` (SB3's rollout start): when a checkpoint is due, the
-       owed gradient steps are paid, the checkpoint written, and the running
-       episodes cut (``cut_episodes``).
-    2. SB3 draws the N actions.
+    The loop is ``collect``; each vector step runs, in this order (SB3's):
+    1. ``at_step_start``: when a checkpoint is due, the owed gradient steps
+       are paid, the checkpoint written, and the running episodes cut
+       (``cut_episodes``).
+    2. ``actions``: the N actions, uniform at random before
+       ``learning_starts``, else sampled from the policy.
     3. ``BatchVecEnv.step_wait`` sends them; while the sim computes the step,
-       the previous step's gradient steps are paid (``OverlappedUpdates``);
-       with the step back, ``between_steps`` runs the owner's jobs and, when
-       due, the interval evaluation.
-    4. ``after_step`` (SB3's callback, before SB3 stores the transition):
-       counts, finished episodes, progress, the stop check, and this step's
-       gradient steps owed.
-    5. SB3 stores the transition.
+       the previous step's transitions and gradient steps are paid in one
+       compiled call (``OverlappedUpdates``); with the step back,
+       ``between_steps`` runs the owner's jobs and, when due, the interval
+       evaluation.
+    4. ``after_step`` (before the transitions are stored): counts, finished
+       episodes, progress, the stop check, and this step's gradient steps
+       owed. A step that ends the goal is not stored, as in SB3.
+    5. The step's transitions wait for the next payment.
     At the end: the last evaluation (unless one ran at that very step), the
     policy stored, the outcome kept for a client that asks again.
     """
@@ -320,10 +326,10 @@ class _Goal:
                                    policy_name=spec.output_policy, global_step=lambda: trainer.total_steps,
                                    between_steps=self.between_steps,
                                    time_limit_terminal=trainer.profile.time_limit_terminal)
-        self.model, self.resumed = self.model_to_train()
+        self.model, self.ring, self.resumed = self.model_to_train()
         self.seed_streams()
         self.tune()
-        self.updates = OverlappedUpdates(self.model, inclusive_start=self.tuning.random_steps is not None)
+        self.updates = OverlappedUpdates(self.model, self.ring, inclusive_start=self.tuning.random_steps is not None)
         self.vec_env.while_stepping = self.updates.pay
         self.start_timesteps = self.model.num_timesteps - self.state.steps_used  # the model's count at step 0
         self.last_checkpoint = self.state.steps_used
@@ -331,20 +337,27 @@ class _Goal:
         self.started = time.monotonic()
         self.recent: deque[bool] = deque(maxlen=50)  # successes of the last episodes, for progress
         self.stop_reason = ""
+        self.observations: np.ndarray | None = None  # the envs' latest, which the next actions act on
 
-    def model_to_train(self):
-        """The model to train and the step it resumes from (0 for a new goal)."""
+    def model_to_train(self) -> tuple[object, TransitionRing, int]:
+        """The model to train, its replay buffer and the step it resumes from (0 for a new goal)."""
         spec, trainer = self.spec, self.trainer
         saved = _read_checkpoint(self.checkpoint_dir)
         if saved is not None and saved["spec"] == _spec_key(spec):
+            if saved.get("format") != CHECKPOINT_FORMAT:
+                raise ValueError(f"the checkpoint of {spec.output_policy!r} at step {saved['state']['steps_used']} "
+                                 f"is of format {saved.get('format', 'sb3-loop (none named)')!r}, and this learner "
+                                 f"resumes {CHECKPOINT_FORMAT!r} (its replay buffer and minibatches are another "
+                                 f"loop's): delete {self.checkpoint_dir} to train the goal again")
             if saved.get("learner") != trainer.learner_key:
                 raise ValueError(f"the checkpoint of {spec.output_policy!r} at step {saved['state']['steps_used']} "
                                  f"was trained with {saved.get('learner')}, this learner runs "
                                  f"{trainer.learner_key}: send the goal to a learner of those settings, or "
                                  f"delete {self.checkpoint_dir} to train it again")
             model = load_model(self.checkpoint_dir / saved["model"], env=self.vec_env)
-            if not load_replay_buffer(model.replay_buffer, self.checkpoint_dir / saved["buffer"]):
-                self.start_buffer(model)
+            ring = TransitionRing.for_model(model)
+            if not ring.load(self.checkpoint_dir / saved["buffer"]):
+                self.start_buffer(model, ring)
             try:
                 self.state = _GoalState(**saved["state"])
                 restore_random_state(model, saved["random_state"])
@@ -352,42 +365,46 @@ class _Goal:
             except (KeyError, TypeError, ValueError) as error:
                 raise ValueError(f"{self.checkpoint_dir / CHECKPOINT_FILE}: not a checkpoint's state "
                                  f"({type(error).__name__}: {error})") from error
-            return model, self.state.steps_used
-        model = trainer._warm_model(spec)
-        if model is not None:
+            return model, ring, self.state.steps_used
+        warm = trainer._warm_model(spec)
+        if warm is not None:
+            model, ring = warm
             model.set_env(self.vec_env, force_reset=True)
             if self.tuning.rearm_warm:
                 model.learning_starts = model.num_timesteps + self.tuning.random_steps
-            return model, 0
+            return model, ring, 0
         model = load_model(str(trainer.policies.model_path(spec.initial_policy)), env=self.vec_env)
-        self.start_buffer(model)
+        ring = TransitionRing.for_model(model)
+        self.start_buffer(model, ring)
         self.state.critic_warmup = self.tuning.critic_warmup  # a warm model's critic has seen its data
         start_fine_tuning(model, self.tuning, spec.episode_tasks or (spec.task,))
-        return model, 0
+        return model, ring, 0
 
-    def start_buffer(self, model) -> None:
+    def start_buffer(self, model, ring: TransitionRing) -> None:
         """Fill the new model's empty buffer with the initial policy's experience (``FineTuning.experience``),
         and act as ``FineTuning.first_actions`` says until its random steps are over (``OverlappedUpdates``
         waits for a batch in the buffer)."""
         if self.tuning.experience:
             experience = self.trainer.policies.experience(self.spec.initial_policy)
             if experience is not None:
-                add_experience(model.replay_buffer,
-                               {name: values[-self.tuning.experience:] for name, values in experience.items()})
+                ring.add({name: values[-self.tuning.experience:] for name, values in experience.items()})
         random_steps = 0
         if self.tuning.first_actions == "random":
             random_steps = self.tuning.random_steps or self.tuning.batch_size or model.batch_size
         model.learning_starts = model.num_timesteps + random_steps
 
     def tune(self) -> None:
-        """The goal's schedule on whichever model it trains (stored, checkpointed or warm)."""
+        """The goal's schedule on whichever model it trains (stored, checkpointed or warm): its batch, and the
+        learning rates its optimisers step with (what SBX's ``train`` sets before each update)."""
         model = self.model
         if self.tuning.batch_size is not None:
             model.batch_size = self.tuning.batch_size
-        model.gradient_steps = SAC_KWARGS["gradient_steps"]
         if self.tuning.learning_rate is not None:
             model.learning_rate = self.tuning.learning_rate
-            model._setup_lr_schedule()  # SB3's optimisers read the rate from the schedule at each update
+            model._setup_lr_schedule()
+        rate = model.lr_schedule(model._current_progress_remaining)
+        model.policy.actor_state.opt_state.hyperparams["learning_rate"] = rate
+        model.policy.qf_state.opt_state.hyperparams["learning_rate"] = model.initial_qf_learning_rate or rate
 
     def seed_streams(self) -> None:
         """Seed the goal's random streams: SAC's sampling and, for a seeded goal, its sim episodes.
@@ -424,8 +441,38 @@ class _Goal:
 
     @property
     def steps(self) -> int:
-        """The goal's training env steps so far (SB3 counts a vector step once it is back)."""
+        """The goal's training env steps so far (a vector step counts once it is back)."""
         return self.model.num_timesteps - self.start_timesteps
+
+    def collect(self, env_steps: int) -> None:
+        """SAC on the envs for ``env_steps`` env steps (whole vector steps) or until ``after_step`` ends it."""
+        model, vec_env = self.model, self.vec_env
+        end = model.num_timesteps + env_steps
+        self.observations = vec_env.reset()
+        while model.num_timesteps < end:
+            self.at_step_start()
+            observations = self.observations
+            actions, stored_actions = self.actions(observations)
+            vec_env.step_async(actions)
+            next_observations, rewards, dones, infos = vec_env.step_wait()
+            model.num_timesteps += vec_env.num_envs
+            if not self.after_step():
+                return
+            self.updates.store(transitions(observations, next_observations, stored_actions, rewards, dones, infos))
+            self.observations = next_observations
+
+    def actions(self, observations: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """The envs' actions and those the buffer stores, as SB3's ``_sample_action`` makes them: uniform
+        random before ``learning_starts``, else sampled from the policy (``predict``'s numbers, one call)."""
+        model = self.model
+        policy = model.policy
+        if model.num_timesteps < model.learning_starts:
+            unscaled = np.array([model.action_space.sample() for _ in range(self.vec_env.num_envs)])
+        else:
+            sampled = sample_actions(policy, observations)
+            unscaled = policy.unscale_action(np.clip(sampled.reshape((-1, *model.action_space.shape)), -1, 1))
+        stored = policy.scale_action(unscaled)
+        return policy.unscale_action(stored), stored
 
     def run(self) -> TrainOutcome:
         spec, state, trainer = self.spec, self.state, self.trainer
@@ -438,8 +485,7 @@ class _Goal:
         if remaining > 0 and not (spec.stop_when_learned and state.learned):
             try:
                 with self.updates:
-                    self.model.learn(remaining, callback=_StepCallback(self), reset_num_timesteps=False,
-                                     progress_bar=False)
+                    self.collect(remaining)
             except BaseException as error:
                 # The sim went away, or the process is stopping: keep what was trained.
                 if state.steps_used > self.last_checkpoint:
@@ -454,7 +500,7 @@ class _Goal:
             return _outcome(state, False, f"stopped after {state.steps_used} steps: {self.stop_reason}")
         if spec.task and (state.score is None or state.steps_at_last_eval != state.steps_used):
             self.evaluate(state.steps_used)
-        stored = trainer._store(spec, self.model, state)
+        stored = trainer._store(spec, self.model, self.ring, state)
         verdict = ("learned" if state.learned else "not learned") if spec.task else "trained"
         message = f"{verdict} after {state.steps_used} steps"
         if self.resumed:
@@ -463,8 +509,8 @@ class _Goal:
         return _outcome(state, True, message)
 
     def at_step_start(self) -> None:
-        """Step 1: before the actions are drawn, the last step's transition is in the buffer, so a
-        checkpoint here holds everything the next step depends on."""
+        """Step 1: before the actions are drawn, the last step's transitions are stored, so a checkpoint
+        here holds everything the next step depends on."""
         if self.steps - self.last_checkpoint >= self.trainer.checkpoint_interval:
             with self.updates.settled():
                 self.save_checkpoint()
@@ -473,11 +519,11 @@ class _Goal:
     def between_steps(self) -> bool:
         """Step 3, with the step back: True when the envs were used (their episodes are gone)."""
         used = self.owner_between_steps()
-        # This step's count: SB3 adds the step to num_timesteps after it returns. Evaluating
-        # here, not in the callback that follows, scores the policy at exactly the interval
-        # (SB3's callback would see the same model: updates through the step before), and a
-        # goal that then stops has steps_used equal to the evaluation's step, so the end
-        # does not evaluate it again (a second score could undo "learned").
+        # This step's count: the loop adds the step to num_timesteps after it returns. Evaluating
+        # here, not in ``after_step``, scores the policy at exactly the interval (``after_step``
+        # would see the same model: updates through the step before), and a goal that then stops
+        # has steps_used equal to the evaluation's step, so the end does not evaluate it again (a
+        # second score could undo "learned").
         steps = self.steps + self.vec_env.num_envs
         spec = self.spec
         if spec.task and spec.eval_interval and steps - self.state.steps_at_last_eval >= spec.eval_interval:
@@ -505,7 +551,7 @@ class _Goal:
         self.stop_reason = self.should_stop()
         keep_going = (not self.stop_reason and not (spec.stop_when_learned and state.learned)
                       and not (spec.episode_limit and len(state.episodes) >= spec.episode_limit))
-        if keep_going:  # SB3 skips the updates of the step that stops it
+        if keep_going:  # the step that stops the goal owes no updates (SB3's loop returns before them)
             self.updates.owe(self.vec_env.num_envs, critic_only=steps <= state.critic_warmup)
         return keep_going
 
@@ -518,15 +564,14 @@ class _Goal:
         """
         if self.spec.seed is not None:
             self.vec_env.seed(derived_seed(self.spec.seed, TRAINING_STREAM, self.steps))
-        self.model._last_obs = self.vec_env.reset()
-        self.model._last_episode_starts = np.ones(self.vec_env.num_envs, dtype=bool)
+        self.observations = self.vec_env.reset()
 
     def evaluate(self, steps: int) -> None:
         """Score the model on the goal's task as the policy after ``steps`` of the goal's training steps."""
         spec, state = self.spec, self.state
         seed = None if spec.seed is None else derived_seed(spec.seed, EVALUATION_STREAM, steps)
-        (score,) = evaluate(self.trainer.envs, lambda obs: self.model.predict(obs, deterministic=True)[0],
-                            [spec.task], spec.eval_episodes, policy_name=spec.output_policy, seed=seed,
+        (score,) = evaluate(self.trainer.envs, deterministic_actions(self.model.policy), [spec.task],
+                            spec.eval_episodes, policy_name=spec.output_policy, seed=seed,
                             global_step=self.trainer.total_steps)
         state.score = asdict(score)
         state.learned = passes_threshold(score.successes, spec.threshold)
@@ -541,8 +586,9 @@ class _Goal:
         version = previous["version"] + 1 if previous else 1
         model_file, buffer_file = f"model-{version}.npz", f"buffer-{version}.npz"
         atomic_write(folder / model_file, lambda stream: write_model(model, stream))
-        atomic_write(folder / buffer_file, lambda stream: save_replay_buffer(model.replay_buffer, stream))
-        text = json.dumps({"version": version, "spec": _spec_key(self.spec), "learner": self.trainer.learner_key,
+        atomic_write(folder / buffer_file, self.ring.save)
+        text = json.dumps({"format": CHECKPOINT_FORMAT, "version": version, "spec": _spec_key(self.spec),
+                           "learner": self.trainer.learner_key,
                            "model": model_file, "buffer": buffer_file, "state": asdict(self.state),
                            "random_state": random_state(model), "task_position": self.cycle.position}).encode()
         atomic_write(folder / CHECKPOINT_FILE, lambda stream: stream.write(text))
@@ -558,23 +604,23 @@ def _outcome(state: _GoalState, completed: bool, message: str) -> TrainOutcome:
                         [EpisodeSummary(**e) for e in state.episodes], message, completed)
 
 
-class _StepCallback(BaseCallback):
-    """SB3's hooks into a ``_Goal``: steps 1 and 4 of its order."""
-
-    def __init__(self, goal: _Goal):
-        super().__init__()
-        self.goal = goal
-
-    def _on_rollout_start(self) -> None:
-        self.goal.at_step_start()
-
-    def _on_step(self) -> bool:
-        return self.goal.after_step()
+def transitions(observations: np.ndarray, next_observations: np.ndarray, actions: np.ndarray, rewards: np.ndarray,
+                dones: np.ndarray, infos: list[dict]) -> dict[str, np.ndarray]:
+    """One vector step's transitions as SB3's ``_store_transition`` and ``ReplayBuffer.add`` keep them: an
+    episode that ended has its last observation as the next one, and a time limit is marked as such."""
+    next_observations = np.array(next_observations, dtype=np.float32)
+    for i in np.flatnonzero(dones):
+        if infos[i].get("terminal_observation") is not None:
+            next_observations[i] = infos[i]["terminal_observation"]
+    return {"observations": np.array(observations, dtype=np.float32), "next_observations": next_observations,
+            "actions": np.asarray(actions, dtype=np.float32), "rewards": np.asarray(rewards, dtype=np.float32),
+            "dones": np.asarray(dones, dtype=np.float32),
+            "timeouts": np.array([info.get("TimeLimit.truncated", False) for info in infos], dtype=np.float32)}
 
 
 def random_state(model) -> dict:
     """Every generator a SAC goal draws from that its saved model does not keep: SBX's key of the gradient
-    steps (its load seeds it again), numpy's global one (replay buffer batches), the action space's (actions
+    steps and their minibatches (its load seeds it again), numpy's global one, the action space's (actions
     before learning starts). The policy's own key is in the model file."""
     keys, position, has_gauss, cached_gaussian = np.random.get_state()[1:]
     return {"jax": np.asarray(model.key).tolist(),

@@ -64,12 +64,7 @@ def normalize_reset(
     num_envs: int, env_indices: Sequence[int], tasks: Sequence[str], seeds: Sequence[int], phase: int
 ) -> tuple[list[int], list[str | None], list[int]]:
     """Check a reset request; one task (None = keep) and one seed per reset env, in reset order."""
-    indices = [int(i) for i in env_indices] if len(env_indices) else list(range(num_envs))
-    for index in indices:
-        if not 0 <= index < num_envs:
-            raise ValueError(f"env index {index} out of range: this sim has {num_envs} envs")
-    if len(set(indices)) != len(indices):
-        raise ValueError(f"env indices repeat: {indices}")
+    indices = _indices(num_envs, env_indices)
     if len(seeds) == 1:
         # One base seed for the batch, as Gymnasium's vector envs do: env k of the reset gets seed + k.
         seeds = [int(seeds[0]) + k for k in range(len(indices))]
@@ -83,24 +78,39 @@ def normalize_reset(
 
 
 def normalize_step(
-    num_envs: int, action_dim: int, actions: np.ndarray, next_tasks: Sequence[str], phase: int
-) -> tuple[np.ndarray, list[str]]:
-    """Check a step request; actions as ``(N, action_dim)`` in [-1, 1], one next task per env ("" = keep)."""
+    num_envs: int, action_dim: int, actions: np.ndarray, next_tasks: Sequence[str], phase: int,
+    env_indices: Sequence[int] = (),
+) -> tuple[list[int], np.ndarray, list[str]]:
+    """Check a step request; the envs it steps (all when ``env_indices`` is empty), their actions as
+    ``(stepped, action_dim)`` in [-1, 1], and one next task per stepped env ("" = keep)."""
+    indices = _indices(num_envs, env_indices)
+    stepped = len(indices)
     actions = np.asarray(actions, dtype=np.float32)
-    expected = num_envs * action_dim
+    expected = stepped * action_dim
     if actions.size != expected:
-        raise ValueError(f"expected {expected} action values ({num_envs} envs x {action_dim}), got {actions.size}")
+        raise ValueError(f"expected {expected} action values ({stepped} envs x {action_dim}), got {actions.size}")
     if not np.all(np.isfinite(actions)):
         raise ValueError("actions contain NaN or inf")
     if np.any(np.abs(actions) > 1.0 + ACTION_TOLERANCE):
         raise ValueError("actions must lie in [-1, 1]")
-    if len(next_tasks) not in (0, num_envs):
-        raise ValueError(f"next_tasks must be empty or have {num_envs} entries, got {len(next_tasks)}")
+    if len(next_tasks) not in (0, stepped):
+        raise ValueError(f"next_tasks must be empty or have {stepped} entries, got {len(next_tasks)}")
     for task in next_tasks:
         if task:
             task_index(task)
     _check_phase(phase)
-    return np.clip(actions, -1.0, 1.0).reshape(num_envs, action_dim), list(next_tasks) or [""] * num_envs
+    return indices, np.clip(actions, -1.0, 1.0).reshape(stepped, action_dim), list(next_tasks) or [""] * stepped
+
+
+def _indices(num_envs: int, env_indices: Sequence[int]) -> list[int]:
+    """The envs a request names, checked (none named: all, in index order)."""
+    indices = [int(i) for i in env_indices] if len(env_indices) else list(range(num_envs))
+    for index in indices:
+        if not 0 <= index < num_envs:
+            raise ValueError(f"env index {index} out of range: this sim has {num_envs} envs")
+    if len(set(indices)) != len(indices):
+        raise ValueError(f"env indices repeat: {indices}")
+    return indices
 
 
 def _per_env(values: list, count: int, name: str, default) -> list:
@@ -177,10 +187,13 @@ class BatchedEnvs:
         phase: int = PHASE_TRAIN,
         policy_name: str = "",
         global_step: int = 0,
+        env_indices: Sequence[int] = (),
     ) -> StepBatch:
-        """Step every env once with its row of ``actions`` (shape ``(N, action_dim)`` or flat)."""
-        actions, next_tasks = normalize_step(self.num_envs, self.action_dim, actions, next_tasks, phase)
-        return self.apply_step(actions, next_tasks, phase, policy_name, global_step)
+        """Step every env (or those of ``env_indices``) once with its row of ``actions`` (shape
+        ``(stepped, action_dim)`` or flat)."""
+        indices, actions, next_tasks = normalize_step(self.num_envs, self.action_dim, actions, next_tasks, phase,
+                                                      env_indices)
+        return self.apply_step(actions, next_tasks, phase, policy_name, global_step, indices)
 
     def start_step(
         self,
@@ -189,9 +202,10 @@ class BatchedEnvs:
         phase: int = PHASE_TRAIN,
         policy_name: str = "",
         global_step: int = 0,
+        env_indices: Sequence[int] = (),
     ) -> FinishStep:
         """``step``, run when the returned function is called: these envs step in the caller's thread."""
-        return functools.partial(self.step, actions, next_tasks, phase, policy_name, global_step)
+        return functools.partial(self.step, actions, next_tasks, phase, policy_name, global_step, env_indices)
 
     def apply_reset(
         self, indices: list[int], tasks: list[str | None], seeds: list[int], phase: int, policy_name: str
@@ -210,32 +224,39 @@ class BatchedEnvs:
         return observations, interrupted
 
     def apply_step(
-        self, actions: np.ndarray, next_tasks: list[str], phase: int, policy_name: str, global_step: int
+        self, actions: np.ndarray, next_tasks: list[str], phase: int, policy_name: str, global_step: int,
+        indices: Sequence[int] | None = None,
     ) -> StepBatch:
-        """``step`` of a request already checked by ``normalize_step``."""
-        observations = np.empty((self.num_envs, self.obs_dim), dtype=np.float32)
-        terminal = np.zeros((self.num_envs, self.obs_dim), dtype=np.float32)
-        rewards = np.empty(self.num_envs, dtype=np.float32)
-        terminated = np.zeros(self.num_envs, dtype=bool)
-        truncated = np.zeros(self.num_envs, dtype=bool)
-        is_success = np.zeros(self.num_envs, dtype=bool)
+        """``step`` of a request already checked by ``normalize_step``: row r of each array is env
+        ``indices[r]``'s (None: every env, in index order)."""
+        indices = range(self.num_envs) if indices is None else indices
+        stepped = len(indices)
+        observations = np.empty((stepped, self.obs_dim), dtype=np.float32)
+        terminal = np.zeros((stepped, self.obs_dim), dtype=np.float32)
+        rewards = np.empty(stepped, dtype=np.float32)
+        terminated = np.zeros(stepped, dtype=bool)
+        truncated = np.zeros(stepped, dtype=bool)
+        is_success = np.zeros(stepped, dtype=bool)
         finished = []
-        for i, env in enumerate(self.envs):
-            obs, reward, term, trunc, info = env.step(actions[i])
+        for row, i in enumerate(indices):
+            env = self.envs[i]
+            obs, reward, term, trunc, info = env.step(actions[row])
             log = self._logs[i]
             log.phase, log.policy_name = phase, policy_name
-            log.add_step(actions[i].copy(), np.asarray(obs, dtype=np.float32), float(reward), env.joint_positions())
-            rewards[i], terminated[i], truncated[i] = reward, term, trunc
-            is_success[i] = bool(info.get("is_success", False))
+            log.add_step(actions[row].copy(), np.asarray(obs, dtype=np.float32), float(reward), env.joint_positions())
+            rewards[row], terminated[row], truncated[row] = reward, term, trunc
+            is_success[row] = bool(info.get("is_success", False))
             if term or trunc:
-                log.success, log.truncated, log.global_step = bool(is_success[i]), bool(trunc and not term), global_step
+                log.success, log.truncated, log.global_step = bool(is_success[row]), bool(trunc and not term), \
+                    global_step
                 finished.append(log)
-                terminal[i] = obs
-                if next_tasks[i]:
-                    self.tasks[i] = next_tasks[i]
+                terminal[row] = obs
+                if next_tasks[row]:
+                    self.tasks[i] = next_tasks[row]
                 obs = self._begin_episode(i, UNSEEDED, phase, policy_name)
-            observations[i] = obs
-        return StepBatch(observations, rewards, terminated, truncated, is_success, terminal, list(self.tasks), finished)
+            observations[row] = obs
+        return StepBatch(observations, rewards, terminated, truncated, is_success, terminal,
+                         [self.tasks[i] for i in indices], finished)
 
     def snapshot(self, index: int) -> EnvSnapshot:
         env = self.envs[index].unwrapped

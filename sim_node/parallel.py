@@ -55,9 +55,13 @@ def split(num_envs: int, workers: int) -> list[range]:
 
 
 class ProcessBatchedEnvs:
+    """``num_envs`` envs over ``workers`` processes; ``first_index`` numbers them from there in episode logs (an
+    evaluation batch beside a training one), and ``seed`` seeds them as ``BatchedEnvs`` does."""
+
     def __init__(self, num_envs: int, workers: int, initial_task: str, objects_dir: str,
-                 config: GraspEnvConfig, gui: bool = False, seed: int | None = None):
+                 config: GraspEnvConfig, gui: bool = False, seed: int | None = None, first_index: int = 0):
         task_index(initial_task)  # a clear error here, not a worker dying at start-up
+        self.first_index = first_index
         context = mp.get_context("spawn")
         self.shares = split(num_envs, workers)
         self._connections = []
@@ -66,7 +70,8 @@ class ProcessBatchedEnvs:
             parent, child = context.Pipe()
             process = context.Process(
                 target=_worker, name=f"sim-worker-{share.start}", daemon=True,
-                args=(child, share.start, len(share), initial_task, objects_dir, config, 0 if gui else -1, seed),
+                args=(child, first_index + share.start, len(share), initial_task, objects_dir, config,
+                      first_index if gui else -1, seed),
             )
             process.start()
             self._connections.append(parent)
@@ -101,29 +106,39 @@ class ProcessBatchedEnvs:
         return observations, sorted(interrupted, key=lambda log: log.env_index)
 
     def step(self, actions: np.ndarray, next_tasks: Sequence[str] = (), phase: int = PHASE_TRAIN,
-             policy_name: str = "", global_step: int = 0) -> StepBatch:
-        actions, next_tasks = normalize_step(self.num_envs, self.action_dim, actions, next_tasks, phase)
+             policy_name: str = "", global_step: int = 0, env_indices: Sequence[int] = ()) -> StepBatch:
+        indices, actions, next_tasks = normalize_step(self.num_envs, self.action_dim, actions, next_tasks, phase,
+                                                      env_indices)
+        involved = []  # (worker, rows of the request it steps)
         for worker, share in enumerate(self.shares):
-            self._send(worker, "apply_step", (actions[share.start:share.stop], next_tasks[share.start:share.stop],
-                                              phase, policy_name, global_step))
-        parts: list[StepBatch] = [self._receive(worker) for worker in range(len(self.shares))]
+            rows = [row for row, index in enumerate(indices) if index in share]
+            if rows:
+                self._send(worker, "apply_step", (actions[rows], [next_tasks[r] for r in rows], phase, policy_name,
+                                                  global_step, [indices[r] - share.start for r in rows]))
+                involved.append((worker, rows))
+        parts: list[tuple[list[int], StepBatch]] = [(rows, self._receive(worker)) for worker, rows in involved]
+        order = np.argsort(np.concatenate([rows for rows, _ in parts]), kind="stable")  # back to the request's
         result = StepBatch(
-            observations=np.concatenate([p.observations for p in parts]),
-            rewards=np.concatenate([p.rewards for p in parts]),
-            terminated=np.concatenate([p.terminated for p in parts]),
-            truncated=np.concatenate([p.truncated for p in parts]),
-            is_success=np.concatenate([p.is_success for p in parts]),
-            terminal_observations=np.concatenate([p.terminal_observations for p in parts]),
-            tasks=[task for p in parts for task in p.tasks],
-            finished=[log for p in parts for log in p.finished],
+            observations=np.concatenate([p.observations for _, p in parts])[order],
+            rewards=np.concatenate([p.rewards for _, p in parts])[order],
+            terminated=np.concatenate([p.terminated for _, p in parts])[order],
+            truncated=np.concatenate([p.truncated for _, p in parts])[order],
+            is_success=np.concatenate([p.is_success for _, p in parts])[order],
+            terminal_observations=np.concatenate([p.terminal_observations for _, p in parts])[order],
+            tasks=[task for _, p in parts for task in p.tasks],
+            finished=[log for _, p in parts for log in p.finished],
         )
-        self.tasks = list(result.tasks)
+        result.tasks = [result.tasks[r] for r in order]
+        row_of = {self.first_index + index: row for row, index in enumerate(indices)}
+        result.finished.sort(key=lambda log: row_of[log.env_index])  # as one process lists them
+        for index, task in zip(indices, result.tasks):
+            self.tasks[index] = task
         return result
 
     def start_step(self, actions: np.ndarray, next_tasks: Sequence[str] = (), phase: int = PHASE_TRAIN,
-                   policy_name: str = "", global_step: int = 0) -> FinishStep:
+                   policy_name: str = "", global_step: int = 0, env_indices: Sequence[int] = ()) -> FinishStep:
         """``step``, run when the returned function is called, as ``BatchedEnvs.start_step`` does."""
-        return functools.partial(self.step, actions, next_tasks, phase, policy_name, global_step)
+        return functools.partial(self.step, actions, next_tasks, phase, policy_name, global_step, env_indices)
 
     def snapshot(self, index: int) -> EnvSnapshot:
         worker = next(w for w, share in enumerate(self.shares) if index in share)

@@ -18,6 +18,14 @@ a viewer up to date while the sim waits between requests.
 
 With ``workers`` > 1 the envs are split over worker processes that step
 their shares in parallel (``sim_node.parallel``); by default one per core.
+
+Evaluation has envs of its own: resets and steps of phase eval go to
+``eval_envs`` envs (numbered after the training envs in the episode
+records), made at the first such request and split over ``workers``
+processes of their own. A deterministic episode needs no learner between
+steps but the policy's one call per batch, so the more envs a step carries
+the less the round trip weighs: ``bench eval``. ``eval_envs:=0`` serves
+evaluations on the training envs.
 """
 
 from __future__ import annotations
@@ -35,7 +43,7 @@ from rclpy.time import Time as RclpyTime
 from rosgraph_msgs.msg import Clock
 
 from glocal_ros.paths import objects_dir
-from glocal_ros.sim_contract import EpisodeLog
+from glocal_ros.sim_contract import DEFAULT_EVAL_ENVS, PHASE_EVAL, EpisodeLog
 from node_common import names, qos
 from node_common.arrays import from_float32_field, to_float32_field
 from node_common.params import declare
@@ -78,22 +86,30 @@ class SimNode(Node):
         if self.viewer_env >= num_envs:
             raise ValueError(f"viewer_env {self.viewer_env} must be below num_envs {num_envs}")
 
-        workers = declare(self, "workers", 0, "processes stepping the envs in parallel; 0: one per CPU core, "
-                          "at most num_envs; 1: all envs in this process", min_value=0, max_value=256)
-        workers = min(num_envs, workers or os.cpu_count() or 1)
+        workers = declare(self, "workers", 0, "processes stepping the envs in parallel (training's and "
+                          "evaluation's each); 0: one per CPU core, at most the envs; 1: all envs in this process", min_value=0, max_value=256)
+        workers = workers or os.cpu_count() or 1
         seed = declare(self, "seed", -1, "-1: episodes from the OS's entropy; else env k's first episode gets "
                        "seed + k and the rest follow from it, so a run is repeatable", min_value=-1,
                        max_value=2**31 - 1)
+        eval_envs = declare(self, "eval_envs", DEFAULT_EVAL_ENVS, "envs of evaluation (phase eval) resets and "
+                            "steps, over workers of their own, made at the first; 0: the training envs serve them",
+                            min_value=0, max_value=256)
         seed = None if seed < 0 else seed
         config = GraspEnvConfig(max_steps=max_steps)
         objects = objects or str(objects_dir())
-        if workers > 1:
-            self.batch = ProcessBatchedEnvs(num_envs, workers, initial_task, objects, config, gui, seed)
-        else:
-            self.batch = BatchedEnvs(
-                lambda i: GraspEnv(initial_task, objects, config, render_mode="human" if gui and i == 0 else None),
-                num_envs, initial_task, seed=seed,
-            )
+
+        def make_batch(count: int, first_index: int = 0, with_gui: bool = False):
+            processes = min(count, workers)
+            if processes > 1:
+                return ProcessBatchedEnvs(count, processes, initial_task, objects, config, with_gui, seed, first_index)
+            return BatchedEnvs(lambda i: GraspEnv(initial_task, objects, config,
+                                                  render_mode="human" if with_gui and i == 0 else None),
+                               count, initial_task, first_index, seed)
+
+        self.batch = make_batch(num_envs, with_gui=gui)
+        self._eval_batch = None
+        self._make_eval_batch = (lambda: make_batch(eval_envs, first_index=num_envs)) if eval_envs else None
         self.episode_seq = 0
         self.sim_clock = SimClock(round(config.substeps * config.timestep * 1e9))
         self.use_sim_time = bool(self.get_parameter("use_sim_time").value)
@@ -114,15 +130,26 @@ class SimNode(Node):
             if not self.use_sim_time:
                 self.create_timer(1.0 / viewer_rate, self.publish_viewer_state, callback_group=sim_group)
         self.get_logger().info(
-            f"{num_envs} envs in {workers} process{'es' if workers > 1 else ''} on task {initial_task}, "
+            f"{num_envs} envs in {min(num_envs, workers)} process{'es' if min(num_envs, workers) > 1 else ''} on "
+            f"task {initial_task}, {eval_envs or 'no'} evaluation envs of their own, "
             f"obs {self.batch.obs_dim}, action {self.batch.action_dim}"
         )
 
+    def batch_of(self, phase: int):
+        """The envs that serve ``phase``: the evaluation envs (made now if not yet) or the training ones."""
+        if phase != PHASE_EVAL or self._make_eval_batch is None:
+            return self.batch
+        if self._eval_batch is None:
+            self._eval_batch = self._make_eval_batch()
+            self.get_logger().info(f"{self._eval_batch.num_envs} evaluation envs made")
+        return self._eval_batch
+
     @answers_errors("reset")
     def on_reset(self, request: ResetEnvs.Request, response: ResetEnvs.Response) -> ResetEnvs.Response:
-        response.num_envs, response.obs_dim = self.batch.num_envs, self.batch.obs_dim
-        response.action_dim = self.batch.action_dim
-        observations, interrupted = self.batch.reset(
+        batch = self.batch_of(request.phase)
+        response.num_envs, response.obs_dim = batch.num_envs, batch.obs_dim
+        response.action_dim = batch.action_dim
+        observations, interrupted = batch.reset(
             request.env_indices, request.tasks, request.seeds, request.phase, request.policy_name
         )
         self._publish_episodes(interrupted)
@@ -132,10 +159,11 @@ class SimNode(Node):
 
     @answers_errors("step")
     def on_step(self, request: StepEnvs.Request, response: StepEnvs.Response) -> StepEnvs.Response:
-        response.num_envs, response.obs_dim = self.batch.num_envs, self.batch.obs_dim
-        result = self.batch.step(
+        batch = self.batch_of(request.phase)
+        response.num_envs, response.obs_dim = batch.num_envs, batch.obs_dim
+        result = batch.step(
             from_float32_field(request.actions), request.next_tasks, request.phase,
-            request.policy_name, request.global_step,
+            request.policy_name, request.global_step, request.env_indices,
         )
         self.sim_clock.advance()
         self.clock_pub.publish(Clock(clock=self.sim_clock.stamp()))
@@ -185,6 +213,8 @@ class SimNode(Node):
 
     def close(self) -> None:
         self.batch.close()
+        if self._eval_batch is not None:
+            self._eval_batch.close()
 
 
 def main(args=None) -> int:

@@ -23,7 +23,7 @@ def test_bench_learner_reports_one_row_per_env_count():
     rows = run_learner_bench([1], steps=1000, rounds=1, log=log.append)
 
     (row,) = rows
-    assert (row.num_envs, row.workers) == (1, 1)
+    assert (row.profile, row.num_envs, row.workers) == ("glocal_ros", 1, 1)
     assert row.in_process > 0 and row.through_ros > 0 and row.learner_node > 0
     assert row.ratio > 0 and row.learner_node_ratio > 0 and row.env_floor > 0 and row.floor_ratio > 0
     assert [len(run) for run in row.rounds] == [1, 1, 1, 1]
@@ -35,27 +35,29 @@ def test_bench_learner_reports_one_row_per_env_count():
     assert "Command: `glocal-ros bench learner --envs 1`" in report
     table = [line for line in lines if line.startswith("|")]
     assert len(table) == 3  # header, alignment, one row
-    assert all(line.count("|") == 9 for line in table)  # eight columns
+    assert all(line.count("|") == 10 for line in table)  # nine columns
     cells = [cell.strip() for cell in table[2].strip("|").split("|")]
-    assert cells[0] == "1" and cells[2].endswith("(1)")
-    assert all(float(cell.split()[0]) > 0 for cell in cells[1:])
-    assert any(line.startswith("- N=1: in-process ") for line in lines)
+    assert cells[:2] == ["glocal_ros", "1"] and cells[3].endswith("(1)")
+    assert all(float(cell.split()[0]) > 0 for cell in cells[2:])
+    assert any(line.startswith("- glocal_ros, N=1: in-process ") for line in lines)
 
 
 def test_bench_learner_without_learner_node_shows_a_dash():
-    row = LearnerBenchRow(2, 80.0, 72.0, None, 2, ((80.0,), (72.0,), (144.0,)), env_floor=144.0)
+    row = LearnerBenchRow("paper", 2, 80.0, 72.0, None, 2, ((80.0,), (72.0,), (144.0,)), env_floor=144.0)
     report = learner_bench_report([row], "glocal-ros bench learner --no-learner-node", steps=10, rounds=1)
-    (line,) = [line for line in report.splitlines() if line.startswith("| 2 ")]
+    (line,) = [line for line in report.splitlines() if line.startswith("| paper ")]
     assert [cell.strip() for cell in line.strip("|").split("|")] == \
-        ["2", "80.0", "72.0 (2)", "-", "144.0", "0.90", "-", "0.50"]  # the graph is via sim_node here
+        ["paper", "2", "80.0", "72.0 (2)", "-", "144.0", "0.90", "-", "0.50"]  # the graph is via sim_node here
 
 
 def test_bench_learner_command_line():
     args = build_parser().parse_args(["bench", "learner", "--envs", "1,2", "--steps", "100", "--rounds", "2",
                                       "--no-learner-node", "--out", "x.md"])
     assert args.func is cmd_bench_learner
-    assert (args.envs, args.steps, args.rounds, args.no_learner_node, args.out, args.profile) == \
-        ("1,2", 100, 2, True, Path("x.md"), "glocal_ros")
+    assert (args.envs, args.steps, args.rounds, args.no_learner_node, args.out, args.profiles) == \
+        ("1,2", 100, 2, True, Path("x.md"), ["glocal_ros", "paper"])
+    with pytest.raises(SystemExit):
+        build_parser().parse_args(["bench", "learner", "--profiles", "glocal_ros,sb2"])
 
 
 def test_bench_backends_times_both_libraries_learning_on_the_grasp_env():
@@ -213,7 +215,7 @@ def test_bench_transfer_command_line():
     assert args.func is cmd_bench_transfer
     assert (args.recipes, args.tasks, args.seeds, args.budget, args.eval_interval, args.eval_episodes, args.envs,
             args.out) == ("policy-first", "A0,B1", "0,1", 1000, 250, 20, 4, Path("bench/results/transfer.md"))
-    assert (args.priors, args.prior_store, args.profiles) == ("prior", None, "glocal_ros")
+    assert (args.priors, args.prior_store, args.profiles) == ("prior", None, ["glocal_ros"])
     assert build_parser().parse_args(["bench", "transfer"]).recipes == "default"
     args = build_parser().parse_args(["bench", "transfer", "--priors", "prior,prior-64x64", "--prior-store", "p"])
     assert (args.priors, args.prior_store, args.objects_dir) == ("prior,prior-64x64", Path("p"), None)

@@ -10,15 +10,25 @@ from sim_node.scripted_grasp import ScriptedGraspPolicy
 
 
 class RecordingBatch(BatchedEnvs):
-    """BatchedEnvs that keeps every finished episode, to check the bookkeeping."""
+    """BatchedEnvs that keeps every finished episode and the envs of every step, to check the bookkeeping, and
+    each env's latest observation, so that a privileged policy knows which env a row is from."""
 
     def __init__(self, *args, **kwargs):
         super().__init__(*args, **kwargs)
-        self.finished = []
+        self.finished, self.stepped = [], []
+        self.latest = np.zeros((self.num_envs, self.obs_dim), dtype=np.float32)
 
-    def step(self, *args, **kwargs):
-        result = super().step(*args, **kwargs)
+    def reset(self, env_indices=(), *args, **kwargs):
+        observations, interrupted = super().reset(env_indices, *args, **kwargs)
+        self.latest[list(env_indices) or slice(None)] = observations
+        return observations, interrupted
+
+    def step(self, actions, next_tasks=(), phase=0, policy_name="", global_step=0, env_indices=()):
+        result = super().step(actions, next_tasks, phase, policy_name, global_step, env_indices)
+        indices = list(env_indices) or list(range(self.num_envs))
         self.finished += result.finished
+        self.stepped.append(indices)
+        self.latest[indices] = result.observations
         return result
 
 
@@ -30,9 +40,14 @@ def batch():
 
 
 def scripted(batch):
-    """The privileged scripted controller, one per env, as a batch policy."""
+    """The privileged scripted controller, one per env, as a batch policy of the envs whose rows it gets."""
     controllers = [ScriptedGraspPolicy() for _ in batch.envs]
-    return lambda observations: np.stack([c.act(env) for c, env in zip(controllers, batch.envs)])
+
+    def act(observations):
+        envs = [int(np.flatnonzero((batch.latest == row).all(axis=1))[0]) for row in observations]
+        return np.stack([controllers[env].act(batch.envs[env]) for env in envs])
+
+    return act
 
 
 def test_scores_count_successes_of_exactly_the_requested_episodes(batch):
@@ -41,10 +56,9 @@ def test_scores_count_successes_of_exactly_the_requested_episodes(batch):
     assert [(s.task, s.episodes) for s in scores] == [("A0", 4), ("A1", 4)]
     for score in scores:
         ran = [log for log in batch.finished if log.task == score.task]
-        # Each task ran at least its 4 episodes (an env can start one uncounted extra) ...
-        assert len(ran) >= 4
-        # ... and the score counts successes among them only.
-        assert score.successes <= sum(log.success for log in ran)
+        # Each task ran exactly its 4 episodes (an env without a job waits) and the score counts them.
+        assert len(ran) == 4
+        assert score.successes == sum(log.success for log in ran)
     assert scores[0].successes >= 3  # the scripted grasp lifts the easiest object
 
 
@@ -54,10 +68,15 @@ def test_seeded_evaluation_repeats(batch):
     assert first == second
 
 
-def test_more_envs_than_episodes(batch):
+def test_more_envs_than_episodes_steps_only_the_envs_with_a_job(batch):
+    batch.finished.clear()
+    batch.stepped.clear()
     scores = evaluate(batch, scripted(batch), ["A0", "C2"], episodes=1, seed=0)
     assert [s.episodes for s in scores] == [1, 1]
-    assert all(0 <= s.successes <= 1 for s in scores)
+    assert sorted(log.task for log in batch.finished) == ["A0", "C2"]
+    assert [log.env_index for log in batch.finished if log.task == "C2"] == [2]  # spread: envs 0 and 2
+    assert {env for step in batch.stepped for env in step} == {0, 2}, "env 1 has no job and never steps"
+    assert [s.successes for s in scores] == [log.success for log in sorted(batch.finished, key=lambda l: l.task)]
 
 
 def test_bad_arguments(batch):

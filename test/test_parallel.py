@@ -45,6 +45,33 @@ def test_workers_match_one_process_step_for_step(batches):
     assert parallel.snapshot(2).task == "C2"
 
 
+def test_a_step_of_some_envs_moves_only_them_in_the_order_named_in_workers_or_not(batches):
+    """Envs 2 and 0 (one in each worker) step, in that order, for a whole episode; env 1 waits where it was."""
+    rng = np.random.default_rng(1)
+    for batch in batches:
+        batch.reset(tasks=["A0", "B1", "C2"], seeds=[3])
+    waiting = [b.snapshot(1).joint_positions for b in batches]
+    for k in range(T):
+        actions = rng.uniform(-1, 1, (2, 5)).astype(np.float32)
+        results = [b.step(actions, next_tasks=["E4", ""], global_step=k, env_indices=[2, 0]) for b in batches]
+        for result in results:
+            assert result.observations.shape == (2, 63) and len(result.tasks) == 2
+        np.testing.assert_array_equal(results[0].observations, results[1].observations)
+        assert results[0].tasks == results[1].tasks
+        assert [(log.env_index, log.task) for log in results[0].finished] == \
+               [(log.env_index, log.task) for log in results[1].finished]
+    assert results[0].tasks == ["E4", "A0"]  # env 2's episode ended at T: it runs its next task now
+    for batch, before in zip(batches, waiting):
+        assert batch.tasks == ["A0", "B1", "E4"]
+        np.testing.assert_array_equal(batch.snapshot(1).joint_positions, before)
+    with pytest.raises(ValueError, match="out of range"):
+        batches[0].step(np.zeros((1, 5), dtype=np.float32), env_indices=[3])
+    with pytest.raises(ValueError, match="repeat"):
+        batches[0].step(np.zeros((2, 5), dtype=np.float32), env_indices=[1, 1])
+    with pytest.raises(ValueError, match="expected 10 action values"):
+        batches[0].step(np.zeros((3, 5), dtype=np.float32), env_indices=[0, 1])
+
+
 def test_partial_reset_and_bad_requests(batches):
     parallel, _ = batches
     parallel.step(np.zeros((3, 5), dtype=np.float32))

@@ -177,12 +177,13 @@ def test_an_experience_file_outside_the_store_naming_is_refused(tmp_path, model,
         store.experience("G1")
 
 
-def test_recent_experience_and_add_experience_fold_the_env_axis(model):
-    """A buffer of 2 envs that wrapped gives its newest transitions, oldest first; a buffer of 3 envs takes
-    them in whole rows of 3, the oldest left over dropped."""
+def test_recent_experience_folds_the_env_axis_and_a_goals_ring_takes_it_row_by_row(model, tmp_path):
+    """A buffer of 2 envs that wrapped gives its newest transitions, oldest first; a goal's ring takes them
+    all, one row each, keeps its newest ``capacity`` as it goes round, and saves and loads them."""
     from stable_baselines3.common.buffers import ReplayBuffer
 
-    from learner_node.replay_buffer import add_experience, recent_experience
+    from learner_node.replay_buffer import recent_experience
+    from learner_node.updates import TransitionRing
 
     spaces = (model.observation_space, model.action_space)
     two = ReplayBuffer(8, *spaces, device="cpu", n_envs=2)  # SB3: 8 transitions, 4 rows of 2
@@ -194,10 +195,19 @@ def test_recent_experience_and_add_experience_fold_the_env_axis(model):
     np.testing.assert_array_equal(recent["observations"][:, 0], [7, 8, 9, 10, 11])
     assert len(recent_experience(two, 100)["observations"]) == 8
 
-    three = ReplayBuffer(30, *spaces, device="cpu", n_envs=3)
-    assert add_experience(three, recent) == 3  # one whole row of 3; 7 and 8 left out
-    assert three.pos == 1
-    np.testing.assert_array_equal(three.observations[0, :, 0], [9, 10, 11])
-    np.testing.assert_array_equal(three.next_observations[0, :, 0], [10, 11, 12])
-    with pytest.raises(ValueError, match="does not fit"):
-        add_experience(three, {**recent, "observations": np.zeros((5, 10), dtype=np.float32)})
+    ring = TransitionRing(4, 63, 5)
+    assert ring.add(recent) == 4  # the newest 4 of 5
+    assert (ring.size, ring.pos, ring.full) == (4, 0, True)
+    np.testing.assert_array_equal(ring.recent(3)["observations"][:, 0], [9, 10, 11])
+    assert ring.add({name: values[:1] for name, values in recent.items()}) == 1  # 7 replaces the oldest, 8
+    np.testing.assert_array_equal(ring.recent(4)["observations"][:, 0], [9, 10, 11, 7])
+    np.testing.assert_array_equal(ring.recent(4)["next_observations"][:, 0], [10, 11, 12, 8])
+    with (tmp_path / "ring.npz").open("wb") as stream:
+        ring.save(stream)
+    again = TransitionRing(4, 63, 5)
+    assert again.load(tmp_path / "ring.npz")
+    for name, values in ring.recent(4).items():
+        np.testing.assert_array_equal(again.recent(4)[name], values, err_msg=name)
+    assert not TransitionRing(5, 63, 5).load(tmp_path / "ring.npz"), "a ring of another capacity starts empty"
+    with pytest.raises(ValueError, match="do not fit"):
+        ring.add({**recent, "observations": np.zeros((5, 10), dtype=np.float32)})

@@ -16,7 +16,7 @@ from learner_node.policies import PolicyRegistry
 from learner_node.policy_store import PolicyRecord, PolicyStore
 from learner_node.profiles import PROFILES, learner_profile
 from learner_node.sac_settings import DEFAULT_FINE_TUNING, FineTuning
-from learner_node.training import EVALUATION_STREAM, Trainer, TrainSpec
+from learner_node.training import CHECKPOINT_FILE, EVALUATION_STREAM, Trainer, TrainSpec
 from learner_node.vec_env import BatchVecEnv, TaskCycle
 from sim_node.batch import BatchedEnvs
 from sim_node.grasp_env import GraspEnv, GraspEnvConfig
@@ -199,6 +199,16 @@ def test_a_checkpoint_of_another_profile_or_recipe_is_refused_not_resumed(tmp_pa
         with pytest.raises(ValueError, match="the checkpoint of 'out' at step 18 was trained with .*'profile': "
                                              "'glocal_ros'.*delete"):
             Trainer(envs, policies, tmp_path / "checkpoints", fine_tuning=FineTuning()).train(spec)
+        checkpoint = tmp_path / "checkpoints" / "out" / CHECKPOINT_FILE
+        written = checkpoint.read_text()
+        saved = json.loads(written)
+        del saved["format"]  # what the SB3 loop before this one wrote
+        checkpoint.write_text(json.dumps(saved))
+        with pytest.raises(ValueError, match="the checkpoint of 'out' at step 18 is of format 'sb3-loop.*this "
+                                             "learner resumes 'compiled-loop-1'.*delete"):
+            Trainer(envs, policies, tmp_path / "checkpoints").train(spec)
+        assert json.loads(checkpoint.read_text()) == saved, "the refused checkpoint is left as it was"
+        checkpoint.write_text(written)
         resumed = Trainer(envs, policies, tmp_path / "checkpoints").train(spec)
     finally:
         envs.close()

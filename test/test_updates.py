@@ -1,5 +1,5 @@
-"""The learner's gradient steps run while the sim steps: SB3's updates, a step later, none lost; and the
-fine-tuning recipe decides how a goal starts."""
+"""The learner's gradient steps run while the sim steps, in one compiled call per step: SB3's updates, a step
+later, none lost; and the fine-tuning recipe decides how a goal starts."""
 
 import numpy as np
 import pytest
@@ -9,6 +9,7 @@ from learner_node.policies import PolicyRegistry
 from learner_node.policy_store import PolicyStore
 from learner_node.sac_settings import SAC_KWARGS, FineTuning, fine_tuning_recipe
 from learner_node.training import Trainer, TrainSpec
+from learner_node.updates import OverlappedUpdates
 from sim_node.batch import BatchedEnvs
 from sim_node.grasp_env import GraspEnv
 
@@ -37,21 +38,26 @@ class SplitSteps:
         return finish
 
 
-def test_each_steps_updates_run_during_the_next_step_and_the_last_at_the_end(tmp_path, monkeypatch):
-    from sbx import SAC
+def noting_payments(monkeypatch, note):
+    """``OverlappedUpdates.pay`` calls ``note(updates, critic_only, owed)`` before each payment that runs
+    gradient steps, with what it owes (critic-only and all); then pays."""
+    real_pay = OverlappedUpdates.pay
 
+    def noted_pay(updates):
+        if updates.owed or updates.owed_critic_only:
+            note(updates, updates.owed_critic_only, updates.owed_critic_only + updates.owed)
+        return real_pay(updates)
+
+    monkeypatch.setattr(OverlappedUpdates, "pay", noted_pay)
+
+
+def test_each_steps_updates_run_during_the_next_step_and_the_last_at_the_end(tmp_path, monkeypatch):
     num_envs = 2
     envs = SplitSteps(BatchedEnvs(lambda i: GraspEnv("A0"), num_envs, "A0"))
     policies = PolicyRegistry(PolicyStore(tmp_path / "store"), [PolicyStore(assets_dir() / "priors")])
     batch_size = policies.model("prior").batch_size
-    train_calls: list[tuple[bool, int]] = []  # (a step was out, gradient steps)
-    real_train = SAC.train
-
-    def noted_train(model, gradient_steps, batch_size=64):
-        train_calls.append((envs.step_out, gradient_steps))
-        return real_train(model, gradient_steps, batch_size)
-
-    monkeypatch.setattr(SAC, "train", noted_train)
+    payments: list[tuple[bool, int]] = []  # (a step was out, gradient steps)
+    noting_payments(monkeypatch, lambda updates, critic_only, steps: payments.append((envs.step_out, steps)))
     vector_steps_with_updates = 20
     step_budget = batch_size + num_envs * vector_steps_with_updates
     try:
@@ -63,10 +69,10 @@ def test_each_steps_updates_run_during_the_next_step_and_the_last_at_the_end(tmp
 
     assert outcome.completed and outcome.steps_used == step_budget
     # SB3: updates once more than batch_size steps are in, one per env step (gradient_steps=-1).
-    assert sum(steps for _, steps in train_calls) == num_envs * vector_steps_with_updates
-    assert train_calls == [(True, num_envs)] * (vector_steps_with_updates - 1) + [(False, num_envs)]
+    assert sum(steps for _, steps in payments) == num_envs * vector_steps_with_updates
+    assert payments == [(True, num_envs)] * (vector_steps_with_updates - 1) + [(False, num_envs)]
     stored = policies.model("a0")
-    assert stored.gradient_steps == SAC_KWARGS["gradient_steps"]  # the overlap is not saved with the model
+    assert stored.gradient_steps == SAC_KWARGS["gradient_steps"]
     assert stored._n_updates - policies.model("prior")._n_updates == num_envs * vector_steps_with_updates
 
 
@@ -77,7 +83,6 @@ def test_a_recipe_chooses_the_first_actions_and_the_rate_and_updates_wait_for_a_
     the first gradient step comes once the buffer holds a batch, so both update equally often. A recipe's batch
     (None: the stored model's own) is the batch of every update."""
     from gymnasium.spaces import Box
-    from sbx import SAC
 
     tuning = recipe if isinstance(recipe, FineTuning) else fine_tuning_recipe(recipe)
     num_envs = 2
@@ -85,20 +90,20 @@ def test_a_recipe_chooses_the_first_actions_and_the_rate_and_updates_wait_for_a_
     policies = PolicyRegistry(PolicyStore(tmp_path / "store"), [PolicyStore(assets_dir() / "priors")])
     batch = tuning.batch_size or policies.model("prior").batch_size
     random_actions, updates = [0], [0]
-    real_sample, real_train = Box.sample, SAC.train
+    real_sample = Box.sample
 
     def counted_sample(space, *args, **kwargs):
         random_actions[0] += 1
         return real_sample(space, *args, **kwargs)
 
-    def counted_train(model, gradient_steps, batch_size=64):
-        assert batch_size == batch
-        assert model.replay_buffer.pos * num_envs >= batch_size, "an update before a batch was in"
-        updates[0] += gradient_steps
-        return real_train(model, gradient_steps, batch_size)
+    def counted_payment(payer, critic_only, steps):
+        assert payer.model.batch_size == batch
+        in_buffer = payer.ring.size + sum(len(rows["observations"]) for rows in payer.pending)
+        assert in_buffer >= batch, "an update before a batch was in"
+        updates[0] += steps
 
     monkeypatch.setattr(Box, "sample", counted_sample)
-    monkeypatch.setattr(SAC, "train", counted_train)
+    noting_payments(monkeypatch, counted_payment)
     step_budget = batch + num_envs * 20
     try:
         outcome = Trainer(envs, policies, tmp_path / "checkpoints", fine_tuning=tuning).train(TrainSpec(
@@ -132,22 +137,24 @@ def test_critic_warmup_leaves_the_actor_alone_for_the_first_steps_then_updates_b
     """The gradient steps owed for a goal's first ``critic_warmup`` steps move the critics and not the actor;
     every later one moves both; the goal does as many gradient steps as without a warm-up."""
     import jax
-    from sbx import SAC
 
     def flat(state):
         return np.concatenate([np.ravel(leaf) for leaf in jax.tree_util.tree_leaves(state.params)])
 
     num_envs, batch, warmup, step_budget = 2, 32, 60, 100
-    calls: list[tuple[int, bool, bool]] = []  # (gradient steps, the actor moved, the critic moved)
-    real_train = SAC.train
+    calls: list[tuple[int, int, bool, bool]] = []  # (critic-only steps, steps, the actor moved, the critic moved)
+    real_pay = OverlappedUpdates.pay
 
-    def noted_train(model, gradient_steps, batch_size=64):
+    def noted_pay(updates):
+        owed = (updates.owed_critic_only, updates.owed_critic_only + updates.owed)
+        model = updates.model
         actor, critic = flat(model.policy.actor_state), flat(model.policy.qf_state)
-        real_train(model, gradient_steps, batch_size)
-        calls.append((gradient_steps, not np.array_equal(actor, flat(model.policy.actor_state)),
-                      not np.array_equal(critic, flat(model.policy.qf_state))))
+        real_pay(updates)
+        if owed[1]:
+            calls.append((*owed, not np.array_equal(actor, flat(model.policy.actor_state)),
+                          not np.array_equal(critic, flat(model.policy.qf_state))))
 
-    monkeypatch.setattr(SAC, "train", noted_train)
+    monkeypatch.setattr(OverlappedUpdates, "pay", noted_pay)
     envs = BatchedEnvs(lambda i: GraspEnv("A0"), num_envs, "A0")
     policies = PolicyRegistry(PolicyStore(tmp_path / "store"), [PolicyStore(assets_dir() / "priors")])
     try:
@@ -158,19 +165,18 @@ def test_critic_warmup_leaves_the_actor_alone_for_the_first_steps_then_updates_b
         envs.close()
 
     assert outcome.completed and outcome.steps_used == step_budget
-    critic_only = [steps for steps, actor_moved, _ in calls if not actor_moved]
-    both = [steps for steps, actor_moved, _ in calls if actor_moved]
-    assert all(critic_moved for _, _, critic_moved in calls)
-    assert [actor_moved for _, actor_moved, _ in calls] == [False] * len(critic_only) + [True] * len(both)
-    assert sum(both) == step_budget - warmup  # UTD 1 after the warm-up
-    assert sum(critic_only) == warmup - batch  # the warm-up's updates, from the step a batch is in
+    assert all(critic_moved for *_, critic_moved in calls)
+    # The actor moves in exactly the payments with steps that are not critic-only, and those come last.
+    assert [actor_moved for critic_only, steps, actor_moved, _ in calls] == \
+        [steps > critic_only for critic_only, steps, _, _ in calls]
+    assert all(critic_only == 0 for critic_only, *_ in calls[[c[2] for c in calls].index(True) + 1:])
+    assert sum(steps - critic_only for critic_only, steps, *_ in calls) == step_budget - warmup  # UTD 1 after
+    assert sum(critic_only for critic_only, *_ in calls) == warmup - batch  # from the step a batch is in
 
 
 def test_parent_experience_starts_the_buffer_and_the_stored_policy_keeps_the_newest(tmp_path, monkeypatch):
     """The "parent-experience" way: the goal's buffer starts with its initial policy's kept transitions, so
     updates start at the first step; the policy it stores keeps the newest transitions, its own last."""
-    from sbx import SAC
-
     from learner_node.prior import collect_experience
 
     parents = PolicyStore(tmp_path / "parents")
@@ -185,15 +191,13 @@ def test_parent_experience_starts_the_buffer_and_the_stored_policy_keeps_the_new
     envs = BatchedEnvs(lambda i: GraspEnv("B1"), num_envs, "B1")
     policies = PolicyRegistry(PolicyStore(tmp_path / "store"), [parents])
     rows_at_first_update, updates = [], [0]
-    real_train = SAC.train
 
-    def counted_train(model, gradient_steps, batch_size=64):
+    def counted_payment(payer, critic_only, steps):
         if not rows_at_first_update:
-            rows_at_first_update.append(model.replay_buffer.pos)
-        updates[0] += gradient_steps
-        return real_train(model, gradient_steps, batch_size)
+            rows_at_first_update.append(payer.ring.size + sum(len(rows["observations"]) for rows in payer.pending))
+        updates[0] += steps
 
-    monkeypatch.setattr(SAC, "train", counted_train)
+    noting_payments(monkeypatch, counted_payment)
     tuning = FineTuning(first_actions="policy", experience=300)
     try:
         outcome = Trainer(envs, policies, tmp_path / "checkpoints", fine_tuning=tuning).train(TrainSpec(
@@ -203,9 +207,30 @@ def test_parent_experience_starts_the_buffer_and_the_stored_policy_keeps_the_new
 
     assert outcome.completed and outcome.steps_used == step_budget
     assert updates[0] == step_budget, "the parent's 300 transitions are a batch: updates from the first step"
-    assert rows_at_first_update == [300 // num_envs + 1]  # the parent's rows, then the goal's first step
+    assert rows_at_first_update == [300 + num_envs]  # the parent's transitions, then the goal's first step
     kept = policies.experience("b1")
     assert len(kept["observations"]) == 300
     np.testing.assert_array_equal(kept["observations"][:300 - step_budget],
                                   parent_experience["observations"][step_budget:])
     assert not np.array_equal(kept["observations"][-1], parent_experience["observations"][-1])
+
+
+def test_the_loops_actions_are_the_numbers_sb3s_predict_gives(tmp_path):
+    """The compiled calls that act (``sample_actions`` in a goal, ``deterministic_actions`` in evaluations)
+    give exactly what SBX's ``predict`` gives from the same weights and keys."""
+    import copy
+
+    from learner_node.policies import deterministic_actions
+    from learner_node.updates import sample_actions
+
+    model = PolicyStore(assets_dir() / "priors").load("prior")
+    observations = np.random.default_rng(0).uniform(-1, 1, (4, 63)).astype(np.float32)
+    observations[:, :49] = 0
+    observations[:, 3] = 1
+    np.testing.assert_array_equal(deterministic_actions(model.policy)(observations),
+                                  model.predict(observations, deterministic=True)[0])
+    twin = copy.copy(model.policy)  # the same weights and key
+    for _ in range(3):  # each call draws from a new key, in the same order
+        expected = model.predict(observations, deterministic=False)[0]
+        np.testing.assert_array_equal(twin.unscale_action(np.clip(sample_actions(twin, observations), -1, 1)),
+                                      expected)

@@ -1,6 +1,6 @@
 """``glocal-ros bench learner``: SAC env steps/s with updates, in-process vs through sim_node.
 
-For each N, the same Train goal (SAC from the learner profile's shipped A0
+For each learner profile and each N, the same Train goal (SAC from the profile's shipped A0
 ``prior`` on G3, an object the prior is still learning, so that episodes run to
 their time limit as in a curriculum's goals rather than ending in a few steps;
 one compute thread) runs on N envs three ways:
@@ -72,6 +72,7 @@ BATCH_SIZE = NETWORKS[DEFAULT_NETWORK].batch_size  # the shipped prior's (train-
 
 @dataclass(frozen=True)
 class LearnerBenchRow:
+    profile: str  # the learner profile of the goals (``learner_node.profiles``)
     num_envs: int
     in_process: float  # env steps/s with SAC updates, envs in this process
     through_ros: float  # env steps/s with SAC updates here, envs in sim_node
@@ -171,7 +172,8 @@ def _wait(future, timeout: float, what: str):
 
 
 def run_learner_bench(env_counts: Sequence[int], steps: int, rounds: int, learner_node: bool = True,
-                      log: Callable[[str], None] = print, profile: str = DEFAULT_PROFILE) -> list[LearnerBenchRow]:
+                      log: Callable[[str], None] = print, profiles: Sequence[str] = (DEFAULT_PROFILE,)
+                      ) -> list[LearnerBenchRow]:
     from learner_node.sim_client import SimClient
     from sim_node.batch import BatchedEnvs
     from sim_node.grasp_env import GraspEnv
@@ -179,16 +181,17 @@ def run_learner_bench(env_counts: Sequence[int], steps: int, rounds: int, learne
     domain_id, lock = reserve_domain_id()
     work = Path(tempfile.mkdtemp(prefix="glocal-bench-learner-"))
     logs = work / "logs"
-    learner_profile = PROFILES[profile]
-    policies = PolicyRegistry(PolicyStore(work / "policies"), [PolicyStore(learner_profile.shipped_priors())], seed=0)
     rng = np.random.default_rng(0)
     rows = []
     stack = ExitStack()
     try:
         node = stack.enter_context(spinning_node("bench_learner", domain_id))
-        for num_envs in env_counts:
+        for profile, num_envs in ((profile, num_envs) for profile in profiles for num_envs in env_counts):
+            learner_profile = PROFILES[profile]
+            policies = PolicyRegistry(PolicyStore(work / "policies" / profile),
+                                      [PolicyStore(learner_profile.shipped_priors())], seed=0)
             workers = min(num_envs, os.cpu_count() or 1)
-            namespace = f"/bench{num_envs}"
+            namespace = f"/bench_{profile}_{num_envs}"
             env = isolated_environment(domain_id, logs)
             processes = [NodeProcess("sim_node", logs, {"num_envs": num_envs, "initial_task": TASK}, env=env,
                                      extra_args=namespace_arguments(namespace))]
@@ -222,11 +225,11 @@ def run_learner_bench(env_counts: Sequence[int], steps: int, rounds: int, learne
                 for round_index in range(rounds):
                     for run, (name, measure) in zip(runs, variants):
                         run.append(measure(f"bench-{name.split()[-1]}-{num_envs}-{round_index}"))
-                        log(f"N={num_envs} round {round_index + 1}/{rounds}: {name} {run[-1]:.1f} steps/s")
+                        log(f"{profile} N={num_envs} round {round_index + 1}/{rounds}: {name} {run[-1]:.1f} steps/s")
                 medians = [statistics.median(run) for run in runs]
-                row = LearnerBenchRow(num_envs, medians[0], medians[1], medians[3] if learner_node else None,
+                row = LearnerBenchRow(profile, num_envs, medians[0], medians[1], medians[3] if learner_node else None,
                                       workers, tuple(tuple(run) for run in runs), env_floor=medians[2])
-                log(f"N={num_envs}: in-process {row.in_process:.1f} steps/s, through sim_node ({workers} workers) "
+                log(f"{profile} N={num_envs}: in-process {row.in_process:.1f} steps/s, through sim_node ({workers} workers) "
                     f"{row.through_ros:.1f}, ratio {row.ratio:.2f}"
                     + (f"; learner_node {row.learner_node:.1f}, ratio {row.learner_node_ratio:.2f}"
                        if learner_node else "")
@@ -258,8 +261,9 @@ def learner_bench_report(rows: Sequence[LearnerBenchRow], command: str, steps: i
         f"Command: `{command}`  ",
         f"{time.strftime('%Y-%m-%d %H:%M')}, Python {sys.version.split()[0]}, {os.cpu_count()} CPU cores. "
         f"Load average at the end {os.getloadavg()[0]:.1f} (the machine is shared). "
-        f"One Train goal per measurement: SAC from `{INITIAL_POLICY}` on {TASK} (batch {batch_size}, "
-        f"{gradient_steps} per batch of N env steps, {COMPUTE_THREADS} compute thread, SBX); "
+        f"One Train goal per measurement: SAC from the profile's `{INITIAL_POLICY}` on {TASK} (batch {batch_size}, "
+        f"{gradient_steps} per batch of N env steps, {COMPUTE_THREADS} compute thread, SBX's networks and "
+        f"updates in the learner's compiled loop, `learner_node/updates.py`); "
         f"{steps} env steps timed after {batch_size} + {SETTLE_STEPS} + N warm-up steps (updates start after "
         f"{batch_size}); model loading, the warm-up, the final evaluation and storing are not timed. "
         f"*in-process* and *via sim_node* run the Trainer in the bench process (envs in it, or a sim_node "
@@ -268,11 +272,11 @@ def learner_bench_report(rows: Sequence[LearnerBenchRow], command: str, steps: i
         f"*env floor*: the same envs in the bench process, random actions, no learner (`bench sim`'s "
         f"in-process rate): no goal can beat it. Median of {rounds} alternating rounds.",
         "",
-        "| N envs | in-process | via sim_node (workers) | learner_node | env floor | ratio sim_node / in-process "
-        "| ratio learner_node / in-process | ratio graph / floor |",
-        "| ---: | ---: | ---: | ---: | ---: | ---: | ---: | ---: |",
+        "| profile | N envs | in-process | via sim_node (workers) | learner_node | env floor "
+        "| ratio sim_node / in-process | ratio learner_node / in-process | ratio graph / floor |",
+        "| --- | ---: | ---: | ---: | ---: | ---: | ---: | ---: | ---: |",
     ]
-    lines += [f"| {r.num_envs} | {r.in_process:.1f} | {r.through_ros:.1f} ({r.workers}) | {maybe(r.learner_node, 1)} "
+    lines += [f"| {r.profile} | {r.num_envs} | {r.in_process:.1f} | {r.through_ros:.1f} ({r.workers}) | {maybe(r.learner_node, 1)} "
               f"| {maybe(r.env_floor, 1)} | {r.ratio:.2f} | {maybe(r.learner_node_ratio, 2)} "
               f"| {maybe(r.floor_ratio, 2)} |" for r in rows]
     lines += ["", "Graph: learner_node, or via sim_node where learner_node was not measured."]
@@ -281,6 +285,6 @@ def learner_bench_report(rows: Sequence[LearnerBenchRow], command: str, steps: i
     for r in rows:
         runs = "; ".join(f"{name} " + ", ".join(f"{v:.1f}" for v in run) for name, run in zip(names, r.rounds))
         paired = [", ".join(f"{v / base:.2f}" for v, base in zip(run, r.rounds[0])) for run in r.rounds[1:]]
-        lines.append(f"- N={r.num_envs}: {runs} (ratios in the same round: "
+        lines.append(f"- {r.profile}, N={r.num_envs}: {runs} (ratios in the same round: "
                      + "; ".join(f"{name} {ratios}" for name, ratios in zip(names[1:], paired)) + ")")
     return "\n".join(lines) + "\n"
