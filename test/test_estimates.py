@@ -150,6 +150,7 @@ def test_milestone_estimates_per_strategy_and_step() -> None:
 
 def test_few_seeds_note_says_what_three_seeds_cannot() -> None:
     note = few_seeds_note(3)
-    assert "the IQM trims none" in note and "3.7%" in note and "min to max" in note
-    assert "trims none" not in few_seeds_note(4) and few_seeds_note(4) == ""
+    assert "the IQM trims none" in note and "3.7%" in note and "min to max" in note and "weak evidence" in note
+    assert "min to max" not in few_seeds_note(3, confidence=0.9)  # 3.7% is below 5%
+    assert few_seeds_note(4) == ""
     assert few_seeds_note(0) == "" and few_seeds_note(10) == ""

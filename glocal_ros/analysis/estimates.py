@@ -43,8 +43,10 @@ Choices this module makes where rliable leaves them open:
 - Few seeds: with ``n`` runs of one task a resample that repeats one run
   ``n`` times has probability ``n ** -n``; for ``n <= 3`` that is above 2.5%, so
   the 95% interval of the IQM is exactly the runs' min to max. Such an
-  interval says how far apart the seeds are, not how precise the mean is;
-  :func:`few_seeds_note` says so in words for a table.
+  interval says how far apart the seeds are, not how precise the mean is,
+  and the percentile bootstrap, which only redraws the values observed,
+  undercovers at such n rather than overcovers; :func:`few_seeds_note` says
+  so in words for a table.
 - A group without runs has no estimate (None), and a probability of
   improvement needs runs on both sides.
 """
@@ -200,15 +202,17 @@ def milestone_estimates(values: Mapping[str, Mapping[int, Sequence[float]]], ref
 
 
 def few_seeds_note(fewest_runs: int, confidence: float = CONFIDENCE) -> str:
-    """What a table of IQMs over as few as ``fewest_runs`` runs (of one task) can and cannot say; '' for many."""
-    notes = []
-    if 0 < fewest_runs < 4:
-        notes.append(f"with {fewest_runs} runs the IQM trims none (it cuts int(n/4) from each end) and is the mean")
-    if 0 < fewest_runs and float(fewest_runs) ** -fewest_runs > (1 - confidence) / 2:
-        notes.append(f"a resample repeating one run {fewest_runs} times has probability {fewest_runs}^-"
-                     f"{fewest_runs} = {float(fewest_runs) ** -fewest_runs:.1%}, above "
-                     f"{(1 - confidence) / 2:.1%}, so the {confidence:.0%} interval of the IQM is the runs' "
-                     f"min to max: it shows how far apart the seeds are, not a precise estimate")
-    if not notes:
+    """What estimates over as few as ``fewest_runs`` runs of one task can and cannot say; '' for 4 runs or more."""
+    if not 0 < fewest_runs < 4:
         return ""
+    repeat = float(fewest_runs) ** -fewest_runs
+    notes = [f"with {fewest_runs} runs the IQM trims none (it cuts int(n/4) from each end) and is the mean"]
+    if repeat > (1 - confidence) / 2:
+        notes.append(f"a resample repeating one run {fewest_runs} times has probability {fewest_runs}^-{fewest_runs} "
+                     f"= {repeat:.1%}, above {(1 - confidence) / 2:.1%}, so the {confidence:.0%} interval of the IQM "
+                     "is the runs' min to max: it shows how far apart the seeds are, not a precise estimate")
+    notes.append("the percentile bootstrap draws only the values observed, so at this few runs of a single task "
+                 "(rliable's intervals lean on pooling many tasks) its intervals are if anything too narrow: a "
+                 "probability of improvement whose interval excludes 0.5 is weak evidence, to be read beside "
+                 "Welch's p")
     return f"Few seeds: {'; '.join(notes)}."
