@@ -370,3 +370,6 @@ def test_default_out_is_first_run_dir(recorded, tmp_path) -> None:
 def test_analysis_is_ros_free() -> None:
     code = "import sys, glocal_ros.analysis.report, glocal_ros.analysis.figures; assert 'rclpy' not in sys.modules"
     subprocess.run([sys.executable, "-c", code], check=True, cwd=REPO)
+    # The CLI registers `report` at its start: scipy (a second to import) only once a statistic is due.
+    code = "import sys, glocal_app.cli; glocal_app.cli.build_parser(); assert 'scipy.stats' not in sys.modules"
+    subprocess.run([sys.executable, "-c", code], check=True, cwd=REPO)

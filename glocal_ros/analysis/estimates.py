@@ -57,7 +57,6 @@ from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
 
 import numpy as np
-from scipy.stats import trim_mean
 
 #: rliable's defaults (``get_interval_estimates``): 50,000 resamples, a 95% interval.
 BOOTSTRAP_REPS = 50_000
@@ -83,6 +82,12 @@ class Interval:
         return f"{self.point:.{digits}f} [{self.low:.{digits}f}, {self.high:.{digits}f}]"
 
 
+def _trim_mean(values: np.ndarray, axis: int | None) -> np.ndarray | float:
+    from scipy.stats import trim_mean  # scipy is slow to import: only when an estimate is due (the CLI imports us)
+
+    return trim_mean(values, IQM_TRIM, axis=axis)
+
+
 def as_scores(scores: Sequence[float] | np.ndarray) -> np.ndarray:
     """``scores`` as a float ``(runs, tasks)`` array (a 1-D sequence is one task); ValueError if it has no run."""
     array = np.asarray(scores, dtype=float)
@@ -95,7 +100,7 @@ def as_scores(scores: Sequence[float] | np.ndarray) -> np.ndarray:
 
 def iqm(scores: Sequence[float] | np.ndarray) -> float:
     """The interquartile mean of all runs x tasks pooled (rliable's ``aggregate_iqm``)."""
-    return float(trim_mean(as_scores(scores), IQM_TRIM, axis=None))
+    return float(_trim_mean(as_scores(scores), axis=None))
 
 
 def probability_of_improvement(x: Sequence[float] | np.ndarray, y: Sequence[float] | np.ndarray) -> float:
@@ -139,7 +144,7 @@ def iqm_interval(scores: Sequence[float] | np.ndarray, reps: int = BOOTSTRAP_REP
     scores = as_scores(scores)
     rng = np.random.default_rng(seed)
     values = np.concatenate([
-        trim_mean(_resample(rng, scores, chunk).reshape(chunk, -1), IQM_TRIM, axis=1)
+        _trim_mean(_resample(rng, scores, chunk).reshape(chunk, -1), axis=1)
         for chunk in _chunks(reps, scores.size)])
     return _percentile_interval(iqm(scores), values, confidence)
 
