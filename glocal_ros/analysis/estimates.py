@@ -6,7 +6,8 @@ Precipice", NeurIPS 2021; its library ``rliable``), written here against the
 published definitions and the library's source (``rliable/metrics.py`` and
 ``rliable/library.py`` of version 1.2.0) rather than imported: rliable pulls
 arch, pandas, seaborn and absl for four array operations. ``test_estimates``
-checks every function here against numbers that rliable 1.2.0 computed.
+checks the IQM, the probability of improvement and both intervals against
+numbers that rliable 1.2.0 computed on fixed data.
 
 Scores are a ``(runs, tasks)`` array: ``scores[n, m]`` is run ``n``'s score
 on task ``m``; a 1-D array is one task. In this project a run is one seed of
@@ -37,9 +38,11 @@ Choices this module makes where rliable leaves them open:
   ``seed = BOOTSTRAP_SEED`` unless told, a fresh generator per interval, so
   the same scores give the same interval whatever else a report holds.
   (rliable draws from numpy's global generator, so its numbers depend on what
-  ran before.) The stream differs from rliable's: intervals agree with its up
-  to Monte Carlo error, exactly where the bootstrap distribution is discrete
-  with no atom at the cut (as with 3 seeds of integer counts).
+  ran before, whatever ``random_state`` it is given.) Strategies with as many
+  runs thus share their resampling pattern. The stream differs from
+  rliable's: intervals agree with its up to Monte Carlo error, and exactly
+  where each percentile falls inside one atom of a discrete bootstrap
+  distribution (as with 3 seeds of integer counts).
 - Few seeds: with ``n`` runs of one task a resample that repeats one run
   ``n`` times has probability ``n ** -n``; for ``n <= 3`` that is above 2.5%, so
   the 95% interval of the IQM is exactly the runs' min to max. Such an
