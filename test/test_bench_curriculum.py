@@ -19,7 +19,8 @@ from rosbags.rosbag2 import Reader
 from conftest import REPO
 from glocal_app.benches.curriculum import KEPT_TOPICS, PAPER_LEARNED_AT_4M
 from glocal_app.processes import RUN_FILE, STATE_FILE, run_settings
-from glocal_ros.analysis.report import p_value_cell
+from glocal_ros.analysis.estimates import improvement_interval, iqm_interval
+from glocal_ros.analysis.report import improvement_cell, p_value_cell
 from glocal_ros.analysis.runs import welch_p_value
 from glocal_ros.tasks import ALL_TASKS
 from glocal_ros.topics import CURRICULUM_STATE
@@ -87,12 +88,21 @@ def test_the_table_has_milestones_ratios_t_tests_cost_and_the_paper(tmp_path):
     p_row = milestone_row(table, "Welch's t-test", "random")
     assert p_row[1:] == [p_value_cell(welch_p_value(learned_at("glocal", step), learned_at("random", step)))
                          for step in range(INTERVAL, 4 * INTERVAL + 1, INTERVAL)]
+    steps = range(INTERVAL, 4 * INTERVAL + 1, INTERVAL)
+    iqm_row = milestone_row(table, "### Interquartile mean", "random")
+    assert iqm_row[1:] == ["2", *(iqm_interval(learned_at("random", step)).cell() for step in steps)]
+    assert iqm_row[-1] == "2.5 [2.0, 3.0]"  # 2 seeds: the interval is their range
+    improvement = milestone_row(table, "### Probability of improvement of glocal", "random")
+    assert improvement[1:] == [improvement_cell(improvement_interval(learned_at("glocal", step),
+                                                                     learned_at("random", step)))
+                               for step in steps]
+    assert "Few seeds: with 2 runs" in table
     cost = milestone_row(table, "## Cost per strategy", "glocal")
     assert cost[1] == "2/2"  # finished
     paper = milestone_row(table, "## Beside the paper", "random")
     assert paper[1] == f"{PAPER_LEARNED_AT_4M['random']}/49 (84%)"
     figures = results.parent / "curriculum"
-    for name in ("learned_vs_steps.png", "milestones_violin.png", "learned_grid.png"):
+    for name in ("learned_vs_steps.png", "milestones_violin.png", "milestones_iqm.png", "learned_grid.png"):
         assert (figures / name).read_bytes().startswith(PNG_MAGIC)
         assert f"(curriculum/{name})" in table
 

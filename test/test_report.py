@@ -16,6 +16,7 @@ import numpy as np
 import pytest
 
 from glocal_ros.analysis import figures
+from glocal_ros.analysis.estimates import milestone_estimates
 from glocal_ros.analysis.report import write_report
 from glocal_ros.analysis.runs import (
     CurriculumSnapshot,
@@ -301,7 +302,8 @@ def test_report_writes_figures_and_tables(recorded, tmp_path) -> None:
     assert report == out / "report.md"
     text = report.read_text()
     pngs = sorted(p.name for p in out.glob("*.png"))
-    assert pngs == ["learned_grid.png", "learned_vs_steps.png", "milestones_violin.png", "timeline_glocal_seed0.png"]
+    assert pngs == ["learned_grid.png", "learned_vs_steps.png", "milestones_iqm.png", "milestones_violin.png",
+                    "timeline_glocal_seed0.png"]
     for png in out.glob("*.png"):
         assert png.stat().st_size > 1000 and png.read_bytes()[:8] == PNG_MAGIC
         assert f"]({png.name})" in text
@@ -315,11 +317,17 @@ def test_report_writes_figures_and_tables(recorded, tmp_path) -> None:
     p_4m = milestone_table(groups).p_values["random"][4000]
     assert f"{p_4m:.3f}" in text and "Welch's t-test, glocal vs each strategy" in text
     assert "| random | 0.00e+00* |" in text  # 1M: both groups constant, unequal: p = 0, significant
+    # rliable's statistics: IQM [95% interval] and P(glocal > random); 3 seeds: the interval is the seeds' range.
+    assert "| glocal | 3 | 3.0 [3.0, 3.0] | 4.0 [4.0, 4.0] | 6.0 [6.0, 6.0] | 6.7 [6.0, 7.0] |" in text
+    assert "| random | 2 | 1.0 [1.0, 1.0] | 1.5 [1.0, 2.0] | 2.0 [2.0, 2.0] | 2.5 [2.0, 3.0] |" in text
+    assert "| random | 1.00 [1.00, 1.00]* | 1.00 [1.00, 1.00]* | 1.00 [1.00, 1.00]* | 1.00 [1.00, 1.00]* |" in text
+    assert "Few seeds: with 2 runs the IQM trims none" in text
     assert "bag.2`: **skipped**" in text and f"`{broken}`: **no run read**" in text
     assert "| 2 | 1,500 | B0 | B1, C0, C1 | B0, B1, C0 |" in text
     # Per strategy, beside the learned objects: mean training steps and evaluation episodes.
     assert "training steps (mean) | evaluation episodes (mean) |" in text
-    assert [line.endswith("| 4,500 | 450 |") for line in text.splitlines()
+    final = text.split("## Learned objects at the end of each run", 1)[1].split("##", 1)[0]
+    assert [line.endswith("| 4,500 | 450 |") for line in final.splitlines()
             if line.startswith(("| glocal | 3 |", "| random | 2 |"))] == [True, True]
 
 
@@ -328,7 +336,10 @@ def test_report_of_a_single_run_has_no_t_test(recorded, tmp_path) -> None:
     report = write_report([run_dirs[1]], tmp_path / "single", count_episodes=False)
     text = report.read_text()
     assert "No t-test" in text and "Welch's t-test, glocal" not in text
+    assert "| random | 1 | 1.0 [1.0, 1.0] |" in text and "No probability of improvement" in text
     assert (tmp_path / "single" / "milestones_violin.png").stat().st_size > 1000
+    assert (tmp_path / "single" / "milestones_iqm.png").read_bytes()[:8] == PNG_MAGIC  # the IQM panel alone
+    assert figures.plot_milestone_estimates(milestone_estimates({}, "glocal"), tmp_path / "none.png") is None
     assert not list((tmp_path / "single").glob("timeline_*.png"))  # random has no iterations
 
 
@@ -358,4 +369,7 @@ def test_default_out_is_first_run_dir(recorded, tmp_path) -> None:
 
 def test_analysis_is_ros_free() -> None:
     code = "import sys, glocal_ros.analysis.report, glocal_ros.analysis.figures; assert 'rclpy' not in sys.modules"
+    subprocess.run([sys.executable, "-c", code], check=True, cwd=REPO)
+    # The CLI registers `report` at its start: scipy (a second to import) only once a statistic is due.
+    code = "import sys, glocal_app.cli; glocal_app.cli.build_parser(); assert 'scipy.stats' not in sys.modules"
     subprocess.run([sys.executable, "-c", code], check=True, cwd=REPO)

@@ -14,6 +14,10 @@ together, provided they share the tasks and the budget. It has:
 
 - learned objects per strategy at each milestone: mean and (min-max) over
   seeds, and Welch's two-sided t-test of GloCAL against each strategy;
+- at each milestone, the interquartile mean with its 95% stratified bootstrap
+  interval per strategy and GloCAL's probability of improvement over each
+  other strategy with its interval (rliable's statistics, as ``glocal-ros
+  report`` has them: ``glocal_ros.analysis.estimates``);
 - the ratios GloCAL / random and GloCAL / each ALP-GMM at each milestone
   (equal training budget: evaluation episodes are not charged to it, as in
   the paper), of the means over seeds;
@@ -154,8 +158,9 @@ def curriculum_bench_report(runs: Sequence[RunData], command: str, figures_repor
     ``figures_report``: the ``report.md`` that ``glocal-ros report`` wrote over the same runs, in a
     folder beside the table; its figures are shown.
     """
-    from glocal_ros.analysis.report import (GRID_PNG, LEARNED_VS_STEPS_PNG, MILESTONES_PNG, markdown_table,
-                                            p_value_section)
+    from glocal_ros.analysis.estimates import milestone_estimates
+    from glocal_ros.analysis.report import (ESTIMATES_PNG, GRID_PNG, LEARNED_VS_STEPS_PNG, MILESTONES_PNG,
+                                            estimates_section, markdown_table, p_value_section)
     from glocal_ros.analysis.runs import REFERENCE_STRATEGY, format_steps, group_by_strategy, milestone_table
 
     groups = group_by_strategy(runs)
@@ -189,6 +194,10 @@ def curriculum_bench_report(runs: Sequence[RunData], command: str, figures_repor
             ((f"glocal / {b}", *(_ratio(reference[step], spread[b][step]) for step in milestones)) for b in compared))
         lines.append("")
     lines += p_value_section(table, milestones)
+    if milestones:
+        within_budget = {strategy: {step: per_step[step] for step in milestones if step in per_step}
+                         for strategy, per_step in table.values.items()}
+        lines += estimates_section(milestone_estimates(within_budget, table.reference), milestones)
 
     lines += ["## Cost per strategy", ""]
     rows = []
@@ -223,6 +232,7 @@ def curriculum_bench_report(runs: Sequence[RunData], command: str, figures_repor
                   f"{figures_report.name}]({relative}/{figures_report.name}).", ""]
         for title, name in (("Learned objects vs training steps", LEARNED_VS_STEPS_PNG),
                             ("Learned objects at each milestone", MILESTONES_PNG),
+                            ("IQM and probability of improvement at each milestone", ESTIMATES_PNG),
                             ("Objects learned per strategy", GRID_PNG)):
             if (figures_dir / name).is_file():
                 lines += [f"![{title}]({relative}/{name})", ""]

@@ -2,6 +2,8 @@
 
 - :func:`plot_learned_vs_steps`: learned objects vs training steps, mean and spread over seeds (Fig. 4).
 - :func:`plot_milestone_violins`: learned objects at each milestone, Welch p vs GloCAL (Fig. 5).
+- :func:`plot_milestone_estimates`: IQM with its bootstrap interval per strategy at each milestone, and the
+  reference's probability of improvement over each other strategy (rliable's statistics).
 - :func:`plot_learned_grid`: the 7x7 object grid, fraction of seeds that learned each object (Fig. 7).
 - :func:`plot_timeline`: one run's iterations with global (*) and local tasks, learned ticked (Fig. 3).
 
@@ -23,6 +25,7 @@ import numpy as np  # noqa: E402
 from matplotlib.figure import Figure  # noqa: E402
 from matplotlib.ticker import FuncFormatter  # noqa: E402
 
+from glocal_ros.analysis.estimates import Interval, MilestoneEstimates  # noqa: E402
 from glocal_ros.analysis.runs import (  # noqa: E402
     MilestoneTable,
     RunData,
@@ -149,6 +152,68 @@ def plot_milestone_violins(table: MilestoneTable, path: Path, total_tasks: int =
     note = (f"Welch's t-test p vs {table.reference}; * p < {SIGNIFICANCE}" if table.reference is not None
             else "no t-test: a single strategy, or no reference strategy")
     fig.suptitle(f"Learned objects at each milestone ({note})", fontsize=10)
+    return _save(fig, path)
+
+
+def _interval_bars(ax, xs: np.ndarray, intervals: Sequence[Interval | None], color: str, label: str) -> None:
+    """One strategy's points with their intervals as error bars, at ``xs``; None: nothing drawn there."""
+    drawn = [(x, interval) for x, interval in zip(xs, intervals) if interval is not None]
+    if not drawn:
+        return
+    points = np.array([[i.point, i.point - i.low, i.high - i.point] for _, i in drawn])
+    ax.errorbar([x for x, _ in drawn], points[:, 0], yerr=points[:, 1:].T, fmt="o", color=color, ms=5, capsize=3,
+                lw=1.5, label=label)
+
+
+def plot_milestone_estimates(estimates: MilestoneEstimates, path: Path, total_tasks: int = NUM_TASKS) -> Path | None:
+    """Top: IQM of learned objects per strategy at each milestone with its interval; below (when there is a
+    reference): its probability of improvement over each other strategy with its interval, 0.5 dashed.
+
+    Strategies are side by side within each milestone. Returns None when no run reached a milestone.
+    """
+    if not estimates.steps:
+        return None
+    strategies = list(estimates.iqm)
+    colors = strategy_colors(strategies)
+    panels = 2 if estimates.reference is not None else 1
+    width = max(6.0, 1.5 + 0.3 * len(strategies) * len(estimates.steps))
+    fig, axes = plt.subplots(panels, 1, figsize=(width, 3.8 * panels), squeeze=False)
+    positions = np.arange(len(estimates.steps))
+    labels = [format_steps(step) for step in estimates.steps]
+
+    def offsets(count: int) -> np.ndarray:
+        return (np.arange(count) - (count - 1) / 2) * min(0.8 / max(count, 1), 0.15)
+
+    ax = axes[0][0]
+    for offset, strategy in zip(offsets(len(strategies)), strategies):
+        _interval_bars(ax, positions + offset, [estimates.iqm[strategy][step] for step in estimates.steps],
+                       colors[strategy], f"{strategy} (n={max(estimates.runs[strategy].values())})")
+    ax.set_xticks(positions, labels)
+    ax.set_xlabel("training steps (milestone)")
+    ax.set_ylabel(f"IQM of learned objects (of {total_tasks})")
+    ax.set_ylim(-0.5, total_tasks + 1)
+    ax.set_title(f"IQM, {estimates.confidence:.0%} stratified bootstrap interval", fontsize=10)
+    ax.grid(axis="y", alpha=0.3)
+    ax.legend(loc="upper left", bbox_to_anchor=(1.01, 1.0), fontsize=8)
+    if estimates.reference is not None:
+        ax = axes[1][0]
+        others = list(estimates.improvement)
+        for offset, strategy in zip(offsets(len(others)), others):
+            _interval_bars(ax, positions + offset, [estimates.improvement[strategy][step] for step in estimates.steps],
+                           colors[strategy], f"over {strategy}")
+        ax.axhline(0.5, color="black", ls="--", lw=1)
+        ax.set_xticks(positions, labels)
+        ax.set_xlabel("training steps (milestone)")
+        ax.set_ylabel(f"P({estimates.reference} > strategy)")
+        ax.set_ylim(-0.05, 1.05)
+        ax.set_title(f"Probability of improvement of {estimates.reference}, {estimates.confidence:.0%} interval",
+                     fontsize=10)
+        ax.grid(axis="y", alpha=0.3)
+        ax.legend(loc="upper left", bbox_to_anchor=(1.01, 1.0), fontsize=8)
+    fewest = estimates.fewest_runs()
+    fig.suptitle(f"rliable's statistics over seeds ({estimates.reps:,} bootstrap resamples; as few as {fewest} "
+                 f"seed{'s' if fewest != 1 else ''} per estimate)", fontsize=10)
+    fig.tight_layout()
     return _save(fig, path)
 
 

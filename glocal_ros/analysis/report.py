@@ -2,8 +2,11 @@
 
 Reads bags only (never a live graph): each RUN_DIR's ``bag/``, ``bag.1/``...
 The report has the runs table, learned objects at each milestone per strategy
-with Welch's t-test p against GloCAL, the paper's figures (learned vs steps,
-milestone violins, object grid, curriculum timelines) and the list of bags read.
+with Welch's t-test p against GloCAL, the interquartile mean with its 95%
+stratified bootstrap interval and GloCAL's probability of improvement over
+each other strategy (rliable's statistics, ``glocal_ros.analysis.estimates``),
+the paper's figures (learned vs steps, milestone violins, object grid,
+curriculum timelines) with one of those estimates, and the list of bags read.
 """
 
 from __future__ import annotations
@@ -14,9 +17,11 @@ import sys
 from collections.abc import Iterable, Sequence
 from pathlib import Path
 
+from glocal_ros.analysis.estimates import Interval, MilestoneEstimates, few_seeds_note, milestone_estimates
 from glocal_ros.analysis.runs import (
     CURRICULUM_STATE_TOPIC,
     EPISODES_TOPIC,
+    REFERENCE_STRATEGY,
     MilestoneTable,
     RunData,
     format_steps,
@@ -31,6 +36,7 @@ REPORT_NAME = "report.md"
 LEARNED_VS_STEPS_PNG = "learned_vs_steps.png"
 MILESTONES_PNG = "milestones_violin.png"
 GRID_PNG = "learned_grid.png"
+ESTIMATES_PNG = "milestones_iqm.png"
 
 
 def timeline_png(run: RunData) -> str:
@@ -116,6 +122,45 @@ def p_value_section(table: MilestoneTable, steps: Sequence[int]) -> list[str]:
     return lines + ["", "n/a: a group has fewer than 2 seeds at that milestone, or both are constant and equal.", ""]
 
 
+def improvement_cell(interval: Interval | None) -> str:
+    """``'0.56 [0.00, 1.00]'``, starred when the interval excludes 0.5 (no difference); ``-`` without one."""
+    if interval is None:
+        return "-"
+    return interval.cell(2) + ("*" if interval.low > 0.5 or interval.high < 0.5 else "")
+
+
+def estimates_section(estimates: MilestoneEstimates, steps: Sequence[int]) -> list[str]:
+    """The IQM of each strategy with its interval, and the reference's probability of improvement, at ``steps``."""
+    confidence = f"{estimates.confidence:.0%}"
+    lines = [f"### Interquartile mean with {confidence} stratified bootstrap interval (rliable)", ""]
+    rows = []
+    for strategy, per_step in estimates.iqm.items():
+        seeds = max(estimates.runs[strategy].values(), default=0)
+        cells = []
+        for step in steps:
+            interval, n = per_step.get(step), estimates.runs[strategy].get(step, 0)
+            cells.append("-" if interval is None else interval.cell() + (f" (n={n})" if n != seeds else ""))
+        rows.append((strategy, seeds, *cells))
+    lines += markdown_table(("strategy", "seeds", *(format_steps(step) for step in steps)), rows)
+    lines += ["", "IQM [low, high]: the mean of the middle 50% of the seeds' learned objects (rliable's "
+              f"`aggregate_iqm`), and its {confidence} percentile interval over {estimates.reps:,} resamples of the "
+              "seeds (seeded: the same runs give the same table).", ""]
+    note = few_seeds_note(estimates.fewest_runs(), estimates.confidence)
+    few_seeds = [note, ""] if note else []
+    if estimates.reference is None:
+        return lines + [f"No probability of improvement: it needs runs of `{REFERENCE_STRATEGY}` and of at least "
+                        "one other strategy.", "", *few_seeds]
+    lines += [f"### Probability of improvement of {estimates.reference} over each strategy, {confidence} interval "
+              "(* the interval excludes 0.5)", ""]
+    lines += markdown_table(("strategy", *(format_steps(step) for step in steps)),
+                            ((strategy, *(improvement_cell(per_step.get(step)) for step in steps))
+                             for strategy, per_step in estimates.improvement.items()))
+    return lines + ["", f"P({estimates.reference} > strategy): over every pair of a {estimates.reference} seed and "
+                    "a seed of the strategy, the share in which it learned more, a tie counting 1/2 (rliable's "
+                    "`probability_of_improvement`); 0.5 is no difference either way. Both sides are resampled "
+                    "independently for the interval.", "", *few_seeds]
+
+
 def timeline_section(run: RunData) -> list[str]:
     records = run.iteration_timeline()
     rows = [(r.iteration, f"{r.start_steps:,}", r.global_task or "-", ", ".join(r.local_tasks) or "-",
@@ -164,6 +209,7 @@ def write_report(run_dirs: Sequence[Path], out_dir: Path, count_episodes: bool =
     out_dir.mkdir(parents=True, exist_ok=True)
     groups = group_by_strategy(runs)
     table = milestone_table(groups)
+    estimates = milestone_estimates(table.values, table.reference)
     total_tasks = max(len(run.tasks) for run in runs)
 
     made: list[tuple[str, Path | None]] = [
@@ -171,6 +217,8 @@ def write_report(run_dirs: Sequence[Path], out_dir: Path, count_episodes: bool =
          figures.plot_learned_vs_steps(groups, out_dir / LEARNED_VS_STEPS_PNG)),
         ("Learned objects at each milestone, p vs glocal (Fig. 5)",
          figures.plot_milestone_violins(table, out_dir / MILESTONES_PNG, total_tasks)),
+        (f"IQM and probability of improvement at each milestone, {estimates.confidence:.0%} intervals (rliable)",
+         figures.plot_milestone_estimates(estimates, out_dir / ESTIMATES_PNG, total_tasks)),
         ("Objects learned per strategy (Fig. 7)", figures.plot_learned_grid(groups, out_dir / GRID_PNG)),
     ]
     timeline_runs = [run for strategy, group in groups.items() if is_glocal_family(strategy)
@@ -188,6 +236,8 @@ def write_report(run_dirs: Sequence[Path], out_dir: Path, count_episodes: bool =
     lines += runs_section(runs)
     lines += final_section(groups)
     lines += milestones_section(table)
+    if table.steps:
+        lines += estimates_section(estimates, table.steps)
     lines += ["## Figures", ""]
     for title, path in made:
         lines.append(f"- [{title}]({path.name})" if path is not None else f"- {title}: nothing to draw")
