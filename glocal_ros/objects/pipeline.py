@@ -539,8 +539,10 @@ def load_mesh(path: Path) -> LoadedMesh:
     naming the file if it is missing, not a mesh, empty, cannot be closed or repaired, or has no volume to
     scale into the gripper."""
     path = Path(path)
-    if not path.is_file():
+    if not path.exists():
         raise BadMeshError(f"{path}: no such file")
+    if not path.is_file():
+        raise BadMeshError(f"{path}: not a file")
     try:
         mesh = trimesh.load(path, force="mesh", process=True)
     except Exception as error:  # trimesh raises whatever its parsers raise
