@@ -19,11 +19,12 @@ not a solid with a defect but an unknown shape; it is refused.
 The method, and why: a narrow-band voxel remesh with the libraries already
 installed (trimesh, scipy, scikit-image), not pymeshfix or manifold3d.
 
-- pymeshfix (MeshFix) deletes the faces around a non-manifold edge and
-  refills the holes; it would be a new compiled dependency for four meshes,
-  and its refill is a guess of its own. manifold3d refuses a non-manifold
-  input outright (it needs a manifold to start from). Neither is in the
-  venv; the remesh needs nothing new.
+- pymeshfix (MeshFix) removes the offending faces and refills the holes
+  it leaves: a new compiled dependency for four meshes, and a refill of its
+  own making. manifold3d builds only from a mesh that is already manifold
+  (its documented contract), so it cannot take these as they are. Neither
+  is in the venv (neither was tried here); the remesh needs nothing new
+  and its change is measured.
 - A plain voxel remesh (fill the surface voxels' inside, marching cubes)
   puts the surface on the outer side of the surface voxels: about half a
   voxel too far out, 4-9% more volume on EGAD's meshes at 0.6 mm voxels.
