@@ -48,6 +48,9 @@ class ObjectMetadata:
     # the success rate of its best pose, repeated (the set keeps it at 80% or more).
     lifting_pose_share: Optional[float] = None
     best_pose_success: Optional[float] = None
+    # An imported mesh that was repaired (glocal_ros.objects.repair.MeshRepair.to_dict): the method, the
+    # non-manifold edges closed, and the volume and extents before and after, in the file's units.
+    repair: Optional[dict[str, Any]] = None
 
 
 @dataclass
@@ -64,6 +67,9 @@ class ObjectSetMetadata:
     valid_candidates: Optional[int] = None
     lifting_poses: Optional[dict[str, Any]] = None
     """How ``lifting_pose_share`` was measured: seed, budget, the best pose's minimum success."""
+    warnings: Optional[list[str]] = None
+    """What an imported set keeps although a generated one would be refused for it (an object whose best pose
+    lifts it less than the minimum)."""
 
     def to_dict(self) -> dict[str, Any]:
         return asdict(self)

@@ -13,15 +13,20 @@ simulator is passed in as a ``GraspTrial``, so this package does not import it.
 
 Given a ``LiftingPoseCheck``, the share of top-down poses that lift each
 object and its best pose's success are measured on the staged objects and
-stored beside the other metrics; a set in which some object's best pose lifts
-it less than ``min_best_pose_success`` of the time is refused
-(``UnliftableObjectError``) before anything is written.
+stored beside the other metrics; a generated set in which some object's best
+pose lifts it less than ``min_best_pose_success`` of the time is refused
+(``UnliftableObjectError``) before anything is written to ``out_dir``, and
+what was measured is kept beside it (``<out_dir>.refused.json``). An imported
+(EGAD) set keeps such an object and lists it in ``warnings`` (see
+``import_egad``); a mesh with a few non-manifold edges is repaired on import
+(``glocal_ros.objects.repair``) and the repair recorded.
 """
 
 from __future__ import annotations
 
 import concurrent.futures
 import contextlib
+import json
 import shutil
 import tempfile
 from dataclasses import asdict, dataclass, field
@@ -31,6 +36,7 @@ from typing import Callable, Iterator, Mapping, Optional, Sequence
 import numpy as np
 import trimesh
 
+from glocal_ros.files import atomic_write
 from glocal_ros.objects.cppn import CPPNParams, check_envelope, evaluate_field, sample_cppn, solid_bounds
 from glocal_ros.objects.grid import (
     BINNING_METHOD,
@@ -68,6 +74,7 @@ from glocal_ros.objects.physics import (
     write_urdf,
 )
 from glocal_ros.objects.render import render_contact_sheet
+from glocal_ros.objects.repair import MeshRepair, UnrepairableMeshError, repair_mesh
 from glocal_ros.tasks import ALL_TASKS, validate_tasks
 
 GENERATOR_VERSION = "2.0.0"
@@ -180,11 +187,13 @@ class _Measured:
     solid: trimesh.Trimesh
 
 
-def _measure(mesh: trimesh.Trimesh, grasp_rng: np.random.Generator, config: GeneratorConfig) -> _Measured:
+def _measure(mesh: trimesh.Trimesh, grasp_rng: np.random.Generator, config: GeneratorConfig,
+             as_given: Optional[trimesh.Trimesh] = None) -> _Measured:
     # Complexity on the full marching-cubes mesh, before decimation and
     # scaling (it is scale-invariant); difficulty on the scaled visual mesh,
-    # the geometry the gripper actually meets.
-    complexity = morphological_complexity(mesh)
+    # the geometry the gripper actually meets. A repaired mesh's complexity is
+    # its original's (``as_given``): the metric depends on tessellation.
+    complexity = morphological_complexity(mesh if as_given is None else as_given)
     visual = decimate(mesh, config.visual_faces)
     visual, solid = prepare_for_gripper(visual, mesh, config.gripper_width, config.fit_fraction)
     grasp = grasp_difficulty(visual, grasp_rng, config.grasp_samples, config.gripper_width)
@@ -386,20 +395,40 @@ def never_grasped(scripted: Mapping[str, float], best_poses: Mapping[str, Option
     return never, [task for task in never if (best_poses.get(task) or 0.0) < minimum]
 
 
+def refused_measurements_path(out_dir: Path) -> Path:
+    """Where a refused set's measurements are kept: ``<out_dir>.refused.json``, beside ``out_dir`` (which a
+    refusal leaves as it was)."""
+    out_dir = Path(out_dir)
+    return out_dir.parent / f"{out_dir.name}.refused.json"
+
+
+def _keep_refused_measurements(metadata: ObjectSetMetadata, out_dir: Path, reason: str) -> Path:
+    """Write what was measured of a refused set (its ``objects.json`` as it would have been, and why it was
+    refused) beside ``out_dir``, atomically; return the path."""
+    path = refused_measurements_path(out_dir)
+    text = (json.dumps({"refused": reason, **metadata.to_dict()}, indent=1) + "\n").encode()
+    atomic_write(path, lambda stream: stream.write(text))
+    return path
+
+
 def _check_lifting_poses(staging: Path, metadata: ObjectSetMetadata, check: LiftingPoseCheck,
-                         out_dir: Path, progress: Optional[ProgressCallback]) -> None:
-    """Measure the staged objects into ``metadata``; ``UnliftableObjectError`` if one breaks the rule."""
+                         out_dir: Path, progress: Optional[ProgressCallback], refuse: bool = True) -> list[str]:
+    """Measure the staged objects into ``metadata`` and return those below the rule (``unliftable``'s
+    text). With ``refuse``, one below it raises ``UnliftableObjectError`` after keeping the measurements
+    beside ``out_dir`` (``refused_measurements_path``): 25 minutes of measurement are not thrown away."""
     results = measure_lifting_poses(staging, list(metadata.objects), check.trial, check.seed, check.workers,
                                     progress)
-    failing = unliftable(results, check.min_best_pose_success)
-    if failing:
-        raise UnliftableObjectError(
-            f"every object's best top-down pose must lift it at least {check.min_best_pose_success:.0%} of the "
-            f"time, and {len(failing)} do not: {', '.join(failing)}; {out_dir} is unchanged")
     for task, (share, best) in results.items():
         metadata.objects[task].lifting_pose_share = share
         metadata.objects[task].best_pose_success = best
     metadata.lifting_poses = check.record()
+    failing = unliftable(results, check.min_best_pose_success)
+    if failing and refuse:
+        reason = (f"every object's best top-down pose must lift it at least {check.min_best_pose_success:.0%} "
+                  f"of the time, and {len(failing)} do not: {', '.join(failing)}")
+        kept = _keep_refused_measurements(metadata, out_dir, reason)
+        raise UnliftableObjectError(f"{reason}; {out_dir} is unchanged; the measurements are kept in {kept}")
+    return failing
 
 
 def generate_object_set(
@@ -494,24 +523,51 @@ class BadMeshError(ValueError):
     """A mesh given to the importer cannot become an object; the message names its file."""
 
 
-def load_mesh(path: Path) -> trimesh.Trimesh:
-    """A closed, outward-facing mesh from ``path`` (holes filled); ``BadMeshError`` naming the file if it is
-    empty, cannot be closed, or has no volume to scale into the gripper."""
+@dataclass
+class LoadedMesh:
+    """A mesh as given (``given``, outward-facing) and the closed solid made from it (``solid``: the same
+    mesh, holes filled, or its repair, described by ``repair``)."""
+
+    given: trimesh.Trimesh
+    solid: trimesh.Trimesh
+    repair: Optional[MeshRepair] = None
+
+
+def load_mesh(path: Path) -> LoadedMesh:
+    """A closed, outward-facing mesh from ``path``: holes filled, and a few non-manifold edges repaired
+    (:func:`glocal_ros.objects.repair.repair_mesh`, recorded in ``LoadedMesh.repair``). ``BadMeshError``
+    naming the file if it is missing, not a mesh, empty, cannot be closed or repaired, or has no volume to
+    scale into the gripper."""
+    path = Path(path)
+    if not path.exists():
+        raise BadMeshError(f"{path}: no such file")
+    if not path.is_file():
+        raise BadMeshError(f"{path}: not a file")
     try:
         mesh = trimesh.load(path, force="mesh", process=True)
     except Exception as error:  # trimesh raises whatever its parsers raise
         raise BadMeshError(f"{path}: cannot be read as a mesh ({error})") from error
+    if not isinstance(mesh, trimesh.Trimesh):
+        raise BadMeshError(f"{path}: cannot be read as a mesh (trimesh made a {type(mesh).__name__} of it)")
     if len(mesh.faces) == 0:
         raise BadMeshError(f"{path}: the mesh is empty")
+    repair = None
+    given = mesh.copy()
     if not mesh.is_watertight:
         trimesh.repair.fill_holes(mesh)
         if not mesh.is_watertight:
-            raise BadMeshError(f"{path}: the mesh is not watertight, and filling its holes did not close it")
+            try:
+                mesh, repair = repair_mesh(mesh)
+            except UnrepairableMeshError as error:
+                raise BadMeshError(f"{path}: the mesh is not watertight, filling its holes did not close it, "
+                                   f"and it cannot be repaired: {error}") from error
     if mesh.volume < 0:
         mesh.invert()
+    if given.volume < 0:
+        given.invert()
     if not mesh.volume > 0 or min(mesh.extents) <= 0:
         raise BadMeshError(f"{path}: the mesh encloses no volume, so it cannot be scaled into the gripper")
-    return mesh
+    return LoadedMesh(given, mesh, repair)
 
 
 def import_egad(
@@ -522,29 +578,49 @@ def import_egad(
     progress: Optional[ProgressCallback] = None,
     contact_sheet: bool = True,
     lifting_poses: Optional[LiftingPoseCheck] = None,
+    refuse_unliftable: bool = False,
 ) -> ObjectSetMetadata:
     """Build the same layout from EGAD's evaluation-set meshes (``A0.obj`` .. ``G6.obj``).
 
     Each mesh goes through the generator's steps: complexity on the mesh as
     given (EGAD's own marching-cubes mesh), decimation, EGAD gripper scaling,
-    grasp difficulty, V-HACD, URDF and metadata. The task is the file name;
-    EGAD's grid placement is kept, and the measured metrics are recorded (the
-    simulator's grasp checks are ``glocal-ros assets check``, which
-    ``assets import-egad`` runs after it). Every mesh is checked before
-    anything is written: a ``BadMeshError`` names the first bad file, and
-    ``out_dir`` stays as it was.
+    grasp difficulty, V-HACD, URDF and metadata. The task is the file name:
+    EGAD's own letters are the grid, kept as published, and the measured
+    metrics are recorded (the simulator's grasp checks are ``glocal-ros assets
+    check``, which ``assets import-egad`` runs after it).
+
+    Every mesh is loaded and checked before anything is written
+    (:func:`load_mesh`): a mesh with a few non-manifold edges is repaired, and
+    the repair (volume and extents before and after) is recorded in its
+    object's ``repair``; a missing file, a file that is not a mesh, or a mesh
+    that cannot be closed raises a ``BadMeshError`` (``MissingEgadFilesError``
+    for files missing from a full import) naming the file, and ``out_dir``
+    stays as it was.
+
+    An imported set is EGAD's, not ours to choose: an object whose best
+    top-down pose lifts it less than ``lifting_poses.min_best_pose_success``
+    of the time is recorded and listed in ``ObjectSetMetadata.warnings``, not
+    refused (the paper learned all 49), unless ``refuse_unliftable``; then
+    ``UnliftableObjectError`` is raised, ``out_dir`` is unchanged and the
+    measurements are kept beside it (``refused_measurements_path``).
 
     :param require_all: raise :class:`MissingEgadFilesError` unless all 49 files exist;
         if False, import whichever of them exist (at least one).
-    :param lifting_poses: measure the share of lifting poses and refuse an unliftable object
-        (``UnliftableObjectError``, ``out_dir`` unchanged).
+    :param lifting_poses: measure the share of lifting poses and the best pose's success of every object.
+    :param refuse_unliftable: refuse a set with an object below the rule instead of warning.
     """
     src_dir, out_dir = Path(src_dir), Path(out_dir)
+    if not src_dir.is_dir():
+        raise MissingEgadFilesError(f"{src_dir}: no such directory")
     found = {task: src_dir / f"{task}.obj" for task in ALL_TASKS if (src_dir / f"{task}.obj").exists()}
-    missing = [task for task in ALL_TASKS if task not in found]
+    missing = [f"{task}.obj" for task in ALL_TASKS if task not in found]
     if (require_all and missing) or not found:
         raise MissingEgadFilesError(f"{src_dir}: missing {', '.join(missing)}")
-    meshes = {task: load_mesh(path) for task, path in found.items()}
+    meshes: dict[str, LoadedMesh] = {}
+    for done, (task, path) in enumerate(found.items(), start=1):
+        meshes[task] = load_mesh(path)
+        if progress:
+            progress("meshes", done, len(found))
     metadata = ObjectSetMetadata(
         generator_version=GENERATOR_VERSION,
         source="egad",
@@ -552,16 +628,23 @@ def import_egad(
         binning={"method": "EGAD evaluation-set file names (A0..G6) as published"},
     )
     with staged(out_dir) as staging:
-        for done, (task, mesh) in enumerate(meshes.items(), start=1):
+        for done, (task, loaded) in enumerate(meshes.items(), start=1):
             # Seeded by the grid position, so a re-import gives the same metrics.
-            measured = _measure(mesh, np.random.default_rng([ALL_TASKS.index(task), 1]), config)
+            measured = _measure(loaded.solid, np.random.default_rng([ALL_TASKS.index(task), 1]), config,
+                                as_given=loaded.given if loaded.repair else None)
             metadata.objects[task] = _write_object(
-                task, measured, staging, config, source="egad", source_file=found[task].name
+                task, measured, staging, config, source="egad", source_file=found[task].name,
+                repair=loaded.repair.to_dict() if loaded.repair else None,
             )
             if progress:
                 progress("objects", done, len(found))
         if lifting_poses is not None:
-            _check_lifting_poses(staging, metadata, lifting_poses, out_dir, progress)
+            failing = _check_lifting_poses(staging, metadata, lifting_poses, out_dir, progress,
+                                           refuse=refuse_unliftable)
+            if failing:
+                metadata.warnings = [
+                    f"best pose below {lifting_poses.min_best_pose_success:.0%}: {text}; kept, as EGAD published "
+                    f"it" for text in failing]
         metadata.save(staging)
         if contact_sheet:
             render_contact_sheet(staging, staging / "contact_sheet.png")
