@@ -6,10 +6,12 @@ links kept) into a temporary ``ws/src/glocal_ros``; a plain ``colcon build`` the
 build both packages, glocal_interfaces (``msg_schemas/``) and glocal_ros (``colcon/glocal_ros``,
 see ``colcon.pkg``). The venv stands in for /opt/ros/jazzy: its prefix holds the ROS wheels'
 share/ and CMake files. The installed node then starts from ``install/`` with its setup.bash
-sourced, away from the checkout, as ``ros2 run glocal_ros curriculum_node`` starts it.
+sourced, away from the checkout, as ``ros2 run glocal_ros curriculum_node`` starts it. The README's
+``rosdep install --from-paths ...`` names folders in which rosdep finds both packages too.
 """
 
 import os
+import re
 import shutil
 import subprocess
 import sys
@@ -47,6 +49,14 @@ def in_sourced_workspace(workspace: Path, command: str, cwd: Path) -> subprocess
 def test_a_workspace_clone_builds_both_packages_and_runs_a_node(tmp_path):
     workspace = tmp_path / "ws"
     clone_checkout(workspace / "src" / "glocal_ros")
+
+    # The README's rosdep step sees both packages: rosdep (catkin_pkg) stops at a package.xml as colcon does,
+    # and has no colcon.pkg, so the README names msg_schemas/ for it.
+    from catkin_pkg.packages import find_packages
+
+    (paths,) = re.findall(r"rosdep install --from-paths (.+?) --ignore-src", (REPO / "README.md").read_text())
+    found = {package.name for path in paths.split() for package in find_packages(str(workspace / path)).values()}
+    assert found == {"glocal_ros", "glocal_interfaces"}, paths
     env = {**os.environ, "AMENT_PREFIX_PATH": sys.prefix, "CMAKE_PREFIX_PATH": sys.prefix}
     build = subprocess.run(
         [str(Path(sys.prefix) / "bin" / "colcon"), "build", "--cmake-args",
