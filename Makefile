@@ -20,7 +20,7 @@ $(PY):
 	$(PYTHON) -m venv $(VENV)
 	touch $(VENV)/COLCON_IGNORE
 
-$(STAMPS)/deps: requirements.txt constraints.txt | $(PY)
+$(STAMPS)/deps: $(wildcard requirements*.txt) constraints.txt | $(PY)
 	$(PIP) install -q pip==25.3 setuptools==79.0.1 wheel==0.45.1
 	$(PIP) install -q -r requirements.txt -c constraints.txt
 	@mkdir -p $(STAMPS) && touch $@

@@ -100,6 +100,15 @@ def cmd_pair(args: argparse.Namespace) -> int:
     return serve_pair(args.out, args.index, args.namespace)
 
 
+def cmd_foxglove_layout(args: argparse.Namespace) -> int:
+    from glocal_app.processes import normalize_namespace, pair_namespaces
+    from glocal_ros.foxglove_layout import write_layout
+
+    path = write_layout(args.out, normalize_namespace(args.namespace), pair_namespaces(args.pairs)[0])
+    print(f"wrote {path}: import it in Foxglove (Layouts > Import from file...)")
+    return EXIT_OK
+
+
 def cmd_experiment(args: argparse.Namespace) -> int:
     from glocal_app.launch import experiment
 
@@ -138,7 +147,7 @@ def add_graph_commands(commands) -> None:
     launch.add_argument("--foxglove", type=int, nargs="?", const=FOXGLOVE_PORT, default=None, metavar="PORT",
                         help=f"also start foxglove_bridge_node: the graph's topics live over the Foxglove "
                              f"WebSocket protocol on ws://{FOXGLOVE_HOST}:PORT (default port {FOXGLOVE_PORT}); "
-                             f"open it in Foxglove with the layout assets/foxglove/glocal.json")
+                             f"open it in Foxglove with the layout the run directory gets (foxglove-layout.json)")
     launch.add_argument("--foxglove-host", default=None, metavar="HOST",
                         help=f"serve Foxglove on HOST instead of {FOXGLOVE_HOST} (this host only); e.g. 0.0.0.0 "
                              f"lets every host that reaches the port see the graph, with no authentication")
@@ -152,6 +161,14 @@ def add_graph_commands(commands) -> None:
     pair.add_argument("--index", type=int, required=True, help="which pair: one of the launch's remote pairs")
     pair.add_argument("--namespace", default="", metavar="NS", help="the launch's --namespace")
     pair.set_defaults(func=cmd_pair)
+
+    layout = commands.add_parser("foxglove-layout", help="write the Foxglove layout for a graph under a namespace "
+                                 "(what `launch --foxglove` writes to its run directory)")
+    layout.add_argument("--namespace", default="", metavar="NS", help="the graph's namespace (default: the root)")
+    layout.add_argument("--pairs", type=int, default=1, metavar="K", help="the run's sim/learner pairs: with "
+                        "K >= 2 the layout shows pair0 (default 1)")
+    layout.add_argument("--out", type=Path, required=True, help="the layout file to write")
+    layout.set_defaults(func=cmd_foxglove_layout)
 
     experiment = commands.add_parser("experiment", help="strategies x seeds as separate runs (resumable), "
                                      "then one report")

@@ -8,7 +8,9 @@ SIGINT, so the bag is closed cleanly, and the report is written from the
 run's bags. Ctrl-C does the same at any time, and the same command resumes
 the run: RUN_DIR keeps the curriculum's journal (``curriculum/``), the
 learner's policies and checkpoints (``policies/``), one bag per launch
-(``bag/``, ``bag.1/``, ...), ``logs/`` and ``report/``.
+(``bag/``, ``bag.1/``, ...), ``logs/`` and ``report/``; with a Foxglove endpoint, also the
+Foxglove layout written for the run's namespace (``foxglove-layout.json``,
+``glocal_ros.foxglove_layout``), which opens the live graph and the run's bags alike.
 
 The seed goes to sim, learner and curriculum alike, so that a run with the
 same seed repeats this one. Every node gets what ``glocal_app.processes.
@@ -73,6 +75,7 @@ from glocal_app.processes import (FoxgloveEndpoint, NodeProcess, check_foxglove_
                                    STATE_FILE)
 from glocal_ros.curriculum.codes import STRATEGY_NAMES
 from glocal_ros.domain import Domain, choose_domain_id, domain_id_from_environment
+from glocal_ros.foxglove_layout import RUN_LAYOUT, write_layout
 from glocal_ros.recording import message_counts
 from node_common import names, qos
 from node_common.runner import configure_discovery
@@ -286,7 +289,8 @@ def launch(strategy: str, preset: str, seed: int, run_dir: Path, startup_timeout
         for path in graph:
             start(path)
         if foxglove is not None:
-            print(f"Foxglove: open a connection to {foxglove.url} (layout: assets/foxglove/glocal.json)", flush=True)
+            layout = write_layout(run_dir / RUN_LAYOUT, namespace, pairs_here[0])
+            print(f"Foxglove: open a connection to {foxglove.url} (layout: {layout})", flush=True)
         for index in remote_pair_indices(pairs, remote_pairs):
             print(f"waiting for pair {index}: on its host, with this run directory at the same path, "
                   f"ROS_DOMAIN_ID={domain.domain_id} {pair_command(run_dir, index, namespace)}", flush=True)

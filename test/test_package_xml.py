@@ -9,6 +9,7 @@ not installable here. Every other third-party import must be in
 none, which package.xml's comment must then name.
 """
 
+import re
 import sys
 from pathlib import Path
 
@@ -20,39 +21,56 @@ from test_rooms import ROOMS, imported_roots
 
 #: ROS packages the code imports that the venv cannot hold (not on PyPI): launch/glocal.launch.py's.
 ROS_PACKAGES_NOT_HERE = {"launch", "launch_ros"}
-#: Third-party Python import -> rosdep key (None: rosdistro has no key; package.xml's comment says so).
-PYTHON_KEYS: dict[str, str | None] = {
-    "numpy": "python3-numpy",
-    "scipy": "python3-scipy",
-    "sklearn": "python3-sklearn",
-    "skimage": "python3-skimage",
-    "matplotlib": "python3-matplotlib",
-    "PIL": "python3-pil",
-    "yaml": "python3-yaml",
-    "ruamel": "python3-ruamel.yaml",
-    "tqdm": "python3-tqdm",
+#: Every pinned dependency of requirements-system-ros.txt -> its rosdep key (None: rosdistro's
+#: rosdep/python.yaml has none, and package.xml's comment names it).
+PIP_KEYS: dict[str, str | None] = {
     "torch": "python3-torch",
     "pybullet": "python3-pybullet-pip",
-    "pybullet_data": "python3-pybullet-pip",
-    "pybullet_utils": "python3-pybullet-pip",
     "gymnasium": "python3-gymnasium-pip",
-    "stable_baselines3": "python3-stable-baselines3-pip",
-    "sbx": None,
+    "stable-baselines3": "python3-stable-baselines3-pip",
+    "sbx-rl": None,
     "jax": None,
+    "jaxlib": None,  # jax's CPU backend
     "flax": None,
     "optax": None,
-    "rosbags": "python3-rosbags-pip",
+    "scikit-learn": "python3-sklearn",
+    "threadpoolctl": None,  # scikit-learn's own dependency, imported by the learner
+    "scipy": "python3-scipy",
+    "scikit-image": "python3-skimage",
     "trimesh": "python3-trimesh-pip",
+    "fast-simplification": None,
+    "rosbags": "python3-rosbags-pip",
+    "ruamel.yaml": "python3-ruamel.yaml",
+    "pillow": "python3-pil",
     "mcap": None,
-    "fast_simplification": None,
-    "threadpoolctl": None,  # scikit-learn's own dependency
-    "foxglove": None,  # foxglove-sdk
-    "ray": None,  # glocal-ros experiment --ray
+    "mcap-ros2-support": None,
+    "foxglove-sdk": None,
+    "matplotlib": "python3-matplotlib",
+    "tqdm": "python3-tqdm",
+    "pyyaml": "python3-yaml",
+    "ray": None,
+    "pytest": "python3-pytest",
+    "pytest-timeout": "python3-pytest-timeout",  # pytest.ini's timeout
+    "hypothesis": "python3-hypothesis",
+    "websockets": "python3-websockets",
+    "numpy": "python3-numpy",  # not pinned directly: everything above pulls it in
+    "catkin-pkg": "python3-catkin-pkg-modules",  # a ROS install's own; test_package_xml reads package.xml
 }
-#: How package.xml's comment names a dependency without a key (the pip name).
-PIP_NAMES = {"mcap": "mcap", "fast_simplification": "fast-simplification", "threadpoolctl": "threadpoolctl",
-             "sbx": "sbx-rl", "jax": "jax", "flax": "flax", "optax": "optax",
-             "foxglove": "foxglove-sdk", "ray": "ray"}
+#: Third-party Python import -> its pip name.
+PIP_NAMES: dict[str, str] = {
+    "numpy": "numpy", "scipy": "scipy", "sklearn": "scikit-learn", "skimage": "scikit-image",
+    "matplotlib": "matplotlib", "PIL": "pillow", "yaml": "pyyaml", "ruamel": "ruamel.yaml", "tqdm": "tqdm",
+    "torch": "torch", "pybullet": "pybullet", "pybullet_data": "pybullet", "pybullet_utils": "pybullet",
+    "gymnasium": "gymnasium", "stable_baselines3": "stable-baselines3", "sbx": "sbx-rl", "jax": "jax",
+    "flax": "flax", "optax": "optax", "rosbags": "rosbags", "trimesh": "trimesh", "mcap": "mcap",
+    "fast_simplification": "fast-simplification", "threadpoolctl": "threadpoolctl", "foxglove": "foxglove-sdk",
+    "ray": "ray", "pytest": "pytest", "hypothesis": "hypothesis", "websockets": "websockets",
+    "catkin_pkg": "catkin-pkg",
+}
+#: Third-party Python import -> rosdep key (None: rosdistro has no key; package.xml's comment says so).
+PYTHON_KEYS: dict[str, str | None] = {module: PIP_KEYS[pip] for module, pip in PIP_NAMES.items()}
+#: What the tests need beside pytest's plugins, by pip name: what the tests import, and pytest-timeout.
+TEST_PLUGINS = {"pytest-timeout"}
 OWN = {*ROOMS, "glocal_interfaces"}
 
 
@@ -119,10 +137,61 @@ def test_no_declared_dependency_is_left_over(package):
     leftover = {name for name in declared(package) if name not in used and name not in expected_keys}
     assert leftover == set()
     test_imports = {root for path in sorted((REPO / "test").glob("*.py")) for root in imported_roots(path)}
-    assert {"pytest", "hypothesis"} <= test_imports
-    assert {d.name for d in package.test_depends} == {"python3-pytest", "python3-hypothesis"}
+    assert {"pytest", "hypothesis", "websockets", "yaml", "catkin_pkg"} <= test_imports
+    tests_need = {PIP_NAMES[name] for name in test_imports if name in PIP_NAMES} | TEST_PLUGINS
+    test_keys = {PIP_KEYS[pip] for pip in tests_need} - declared(package) - {None}
+    assert {d.name for d in package.test_depends} == test_keys
+
+
+def pinned(requirements: Path) -> dict[str, str]:
+    """The pip names a requirements file pins (``name==version``), lower case, extras dropped, with their line."""
+    names = {}
+    for line in requirements.read_text().splitlines():
+        line = line.split("#")[0].strip()
+        if line and not line.startswith("-"):
+            name, _, version = line.partition("==")
+            assert version, f"{requirements.name}: {line} is not pinned"
+            names[name.split("[")[0].strip().lower()] = line
+    return names
+
+
+def test_the_venv_installs_both_requirement_files_and_nothing_else():
+    lines = [line for line in (REPO / "requirements.txt").read_text().splitlines()
+             if line.strip() and not line.startswith("#")]
+    assert lines == ["-r requirements-ros-wheels.txt", "-r requirements-system-ros.txt"]
+    assert not set(pinned(REPO / "requirements-ros-wheels.txt")) & set(pinned(REPO / "requirements-system-ros.txt"))
+
+
+def test_the_system_ros_requirements_leave_ros_to_the_system():
+    """What a ROS 2 Jazzy install provides (its packages, rclpy, the build tools) is only in the wheels' file:
+    installed beside /opt/ros/jazzy in a venv with --system-site-packages, it would shadow the system's."""
+    ros_provides = ("ros-", "rclpy", "rosidl", "ament", "catkin-pkg", "colcon", "empy", "lark")
+    wheels = pinned(REPO / "requirements-ros-wheels.txt")
+    assert all(name.startswith(ros_provides) for name in wheels), wheels
+    system = pinned(REPO / "requirements-system-ros.txt")
+    assert not [name for name in system if name.startswith(ros_provides)]
+
+
+def test_every_system_ros_pin_has_its_rosdep_key_or_is_named_without_one(package):
+    system = pinned(REPO / "requirements-system-ros.txt")
+    unknown = set(system) - set(PIP_KEYS)
+    assert unknown == set(), f"new pins: add their rosdep key (or None) to PIP_KEYS and package.xml: {unknown}"
+    keys = {PIP_KEYS[name] for name in system} - {None}
+    declared_keys = declared(package) | {d.name for d in package.test_depends}
+    assert keys - declared_keys == set(), "rosdep keys of pinned dependencies that package.xml does not declare"
+    comment = (REPO / "package.xml").read_text().split("No rosdep key")[1].split("-->")[0]
+    unnamed = [name for name in system if PIP_KEYS[name] is None and not re.search(rf"\b{re.escape(name)}\b", comment)]
+    assert unnamed == [], f"no rosdep key, and package.xml's comment does not name them: {unnamed}"
 
 
 def test_the_ast_walk_reads_the_launch_file():
     roots = imported_roots(REPO / "launch" / "glocal.launch.py")
     assert {"launch", "launch_ros", "ament_index_python", "glocal_app"} <= set(roots)
+
+
+def test_the_license_file_is_the_one_package_xml_and_setup_py_name(package):
+    assert [license_ for license_ in package.licenses] == ["Apache-2.0"]
+    assert 'license="Apache-2.0"' in (REPO / "setup.py").read_text()
+    text = (REPO / "LICENSE").read_text()
+    assert text.split()[:4] == ["Apache", "License", "Version", "2.0,"]
+    assert "END OF TERMS AND CONDITIONS" in text
