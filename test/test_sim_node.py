@@ -37,13 +37,13 @@ def test_lockstep_batch_and_episode_stream(sim, ros_node):
     joint_states = []
     ros_node.create_subscription(JointState, names.JOINT_STATES, joint_states.append, qos.VIEWER)
 
-    response = call(reset, ResetEnvs.Request(tasks=["A0", "B1"], seeds=[11], phase=EpisodeRecord.PHASE_EVAL,
+    response = call(reset, ResetEnvs.Request(tasks=["A0", "B1"], seeds=[11], phase=EpisodeRecord.PHASE_TRAIN,
                                              policy_name="zeros"))
     assert response.success and (response.num_envs, response.obs_dim, response.action_dim) == (NUM_ENVS, 63, 5)
     first = from_float32_field(response.observations, NUM_ENVS)
 
     for k in range(3 * T):
-        response = call(step, step_request(np.zeros((NUM_ENVS, 5)), phase=EpisodeRecord.PHASE_EVAL,
+        response = call(step, step_request(np.zeros((NUM_ENVS, 5)), phase=EpisodeRecord.PHASE_TRAIN,
                                            policy_name="zeros", global_step=k, next_tasks=["C2", ""]))
         assert response.success, response.message
         assert list(response.rewards) == [-1.0] * NUM_ENVS
@@ -53,13 +53,37 @@ def test_lockstep_batch_and_episode_stream(sim, ros_node):
     wait_until(lambda: len(episodes) >= 3 * NUM_ENVS, 60, "6 episode records", processes=[process])
     assert [e.seq for e in episodes] == list(range(len(episodes)))
     record = episodes[0]
-    assert (record.task, record.phase, record.policy_name, record.length) == ("A0", 1, "zeros", T)
+    assert (record.task, record.phase, record.policy_name, record.length) == ("A0", 0, "zeros", T)
     observations = np.asarray(record.observations, dtype=np.float32).reshape(T + 1, 63)
     np.testing.assert_array_equal(observations[0], first[record.env_index])
     assert len(record.actions) == T * 5 and len(record.rewards) == T
     assert len(record.joint_positions) == (T + 1) * len(record.joint_names) == (T + 1) * 9
     assert record.truncated and not record.success and not record.interrupted
     wait_until(lambda: joint_states, 60, "joint states for viewers", processes=[process])
+
+
+def test_evaluation_has_envs_of_its_own_and_a_step_moves_only_the_envs_named(sim, ros_node):
+    """Phase eval addresses DEFAULT_EVAL_ENVS envs, numbered after the training envs in the records; a step
+    that names envs 9 and 3 answers their rows in that order, and only they run episodes."""
+    from glocal_ros.sim_contract import DEFAULT_EVAL_ENVS
+
+    process, reset, step = sim
+    episodes = []
+    ros_node.create_subscription(EpisodeRecord, names.EPISODES, episodes.append, qos.EPISODES)
+    response = call(reset, ResetEnvs.Request(tasks=["A0"], seeds=[3], phase=EpisodeRecord.PHASE_EVAL), 120)
+    assert response.success, response.message
+    assert response.num_envs == DEFAULT_EVAL_ENVS
+    for k in range(T):
+        response = call(step, step_request(np.zeros((2, 5)), env_indices=[9, 3], next_tasks=["", "D4"],
+                                           phase=EpisodeRecord.PHASE_EVAL))
+        assert response.success, response.message
+        assert len(response.rewards) == 2 and len(response.observations) == 2 * 63
+    assert list(response.tasks) == ["A0", "D4"]
+    wait_until(lambda: len(episodes) >= 2, 60, "the two evaluation episodes", processes=[process])
+    assert sorted(e.env_index for e in episodes if e.phase == EpisodeRecord.PHASE_EVAL) == [NUM_ENVS + 3,
+                                                                                             NUM_ENVS + 9]
+    training = call(reset, ResetEnvs.Request(phase=EpisodeRecord.PHASE_TRAIN))
+    assert training.success and training.num_envs == NUM_ENVS
 
 
 @pytest.mark.parametrize("request_fields, message", [
