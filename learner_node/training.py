@@ -480,7 +480,7 @@ class _Goal:
             # "Train until S > B" checks first: a policy that passes already is not trained.
             self.evaluate(state.steps_used)
         remaining = spec.step_budget - state.steps_used
-        # SB3 steps the N envs together: whole steps of N only, so the goal never passes its budget.
+        # The N envs step together: whole steps of N only, so the goal never passes its budget.
         remaining -= remaining % self.vec_env.num_envs
         if remaining > 0 and not (spec.stop_when_learned and state.learned):
             try:
