@@ -19,12 +19,13 @@ import sys
 import threading
 
 import pytest
-from glocal_interfaces.msg import CurriculumState
+from glocal_interfaces.msg import CurriculumState, EpisodeRecord
 from rosbags.highlevel import AnyReader
 
 from conftest import REPO, smoke_tasks
 from glocal_ros.domain import reserve_domain_id
 from glocal_ros.recording import episode_sequence, graph_typestore
+from glocal_ros.sim_contract import DEFAULT_EVAL_ENVS
 from glocal_ros.topics import RECORDED_TOPICS
 from node_common import qos
 
@@ -126,7 +127,10 @@ def test_every_recorded_topic_is_in_the_bag_under_the_namespace(namespaced_run):
     assert final.status == CurriculumState.STATUS_FINISHED and final.step_budget == 300
     assert final.run_id == "glocal-seed2"
     episodes = messages[f"{NAMESPACE}/glocal/episodes"]
-    assert {e.env_index for e in episodes} == {0, 1}, "num_envs 2"
+    training = {e.env_index for e in episodes if e.phase == EpisodeRecord.PHASE_TRAIN}
+    evaluation = {e.env_index for e in episodes if e.phase == EpisodeRecord.PHASE_EVAL}
+    assert training == {0, 1}, "num_envs 2"
+    assert evaluation and evaluation <= set(range(2, 2 + DEFAULT_EVAL_ENVS)), "evaluation envs numbered after them"
     assert {e.task for e in episodes} <= set(smoke_tasks())
     check = episode_sequence(run_dir / "bag", f"{NAMESPACE}/glocal/episodes")
     assert check.ok and check.first == 0, check.summary()

@@ -35,8 +35,8 @@ arms alike.
 a learner_node process (its ``fine_tuning`` parameter set to the recipe, the
 prior copied into its store), in a namespace of their own, sent the goals by
 the curriculum's ``RosLearner``; the arms' pairs run at once. The start is the prior scored by
-``learner/evaluate`` on the same episodes, the curve the goal's evaluations
-on ``glocal/evaluations`` (the k-th one at k intervals: the settings make
+``learner/evaluate`` on the same episodes (the sim holds as many evaluation
+envs as training envs), the curve the goal's evaluations on ``glocal/evaluations`` (the k-th one at k intervals: the settings make
 every evaluation fall exactly on its step).
 
 ``read_transfer_goals`` reads the goals back from a report's per-goal table,
@@ -319,7 +319,9 @@ def run_transfer_graph(recipes: Sequence[str], tasks: Sequence[str], seeds: Sequ
         policy_dir = work / f"policies{index}"
         source = next(store for store in prior_stores(prior_store, profile) if prior in store)
         PolicyStore(policy_dir).add_copy(source, prior, prior)
-        sim_parameters = {"num_envs": settings.num_envs, "initial_task": tasks[0],
+        # As many evaluation envs as training envs: a seeded evaluation's episodes depend on the envs it
+        # runs on (learner_node.evaluation), and in-process goals evaluate on their training envs.
+        sim_parameters = {"num_envs": settings.num_envs, "eval_envs": settings.num_envs, "initial_task": tasks[0],
                           **({"objects_dir": str(settings.objects_dir)} if settings.objects_dir else {})}
         processes = [NodeProcess("sim_node", work / "logs", sim_parameters, env=env, extra_args=remap),
                      NodeProcess("learner_node", work / "logs",
