@@ -55,6 +55,7 @@ from __future__ import annotations
 
 import json
 import signal
+import sys
 import time
 from dataclasses import dataclass
 from pathlib import Path
@@ -72,7 +73,7 @@ from glocal_app.processes import (FoxgloveEndpoint, NodeProcess, check_foxglove_
                                    node_namespace, node_path, normalize_namespace, pair_namespaces, preset_file,
                                    preset_parameters, recorded_run_settings, remote_pair_indices, run_nodes,
                                    run_parameters, run_settings, split_node_path, PAIR_NAMESPACE, PAIR_NODES,
-                                   STATE_FILE)
+                                   STATE_FILE, TENSORBOARD_DIR)
 from glocal_ros.curriculum.codes import STRATEGY_NAMES
 from glocal_ros.domain import Domain, choose_domain_id, domain_id_from_environment
 from glocal_ros.foxglove_layout import RUN_LAYOUT, write_layout
@@ -270,6 +271,8 @@ def launch(strategy: str, preset: str, seed: int, run_dir: Path, startup_timeout
     where += f", {pairs} sim/learner pairs" if pairs > 1 else ""
     print(f"{'resuming' if resumed else 'launching'} preset {preset}, strategy {strategy}, seed {seed}{where} "
           f"on {domain.describe()}; logs in {logs}", flush=True)
+    print(f"training curves: {Path(sys.executable).parent / 'tensorboard'} --logdir {run_dir / TENSORBOARD_DIR}",
+          flush=True)
 
     progress = Progress()
     watchdog = Watchdog(watchdog_sec, startup_timeout)

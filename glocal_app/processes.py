@@ -4,7 +4,7 @@ The plan is ROS-free and is the one source of both ways to start a run:
 ``glocal-ros launch`` (``glocal_app.launch``) and ``ros2 launch glocal_ros
 glocal.launch.py`` (``launch/glocal.launch.py``) give every node the same
 parameters from it: the preset's parameter file, the seed, the run directory's
-``bag/``, ``policies/`` and ``curriculum/``, the namespace and, for the nodes in
+``bag/``, ``policies/``, ``tensorboard/`` and ``curriculum/``, the namespace and, for the nodes in
 ``SIM_TIME_NODES`` only, ``use_sim_time``. A run with a Foxglove endpoint
 (``--foxglove [PORT]``, ``foxglove:=true``) also starts foxglove_bridge_node on it
 (``run_nodes``), first, so that a viewer can connect while the others start.
@@ -64,6 +64,8 @@ FOXGLOVE_PORT = 8765
 #: Where the bridge serves unless told otherwise: this host only. Another address is an explicit opt-in,
 #: as reaching other hosts over DDS is (ROS_AUTOMATIC_DISCOVERY_RANGE).
 FOXGLOVE_HOST = "127.0.0.1"
+#: Where a run directory holds its Train goals' training curves (TensorBoard and CSV, one folder per goal).
+TENSORBOARD_DIR = "tensorboard"
 #: What records which run a run directory holds (``claim_run_dir``).
 RUN_FILE = "run.json"
 #: Where a run directory holds the curriculum's latest state (its journal beside it).
@@ -280,6 +282,7 @@ def run_parameters(strategy: str, seed: int, run_dir: Path, bag: Path, use_sim_t
     for namespace in namespaces:
         pair_nodes[node_path(namespace, "sim_node")] = {"seed": seed, **sim_time}
         pair_nodes[node_path(namespace, "learner_node")] = {"seed": seed, "policy_dir": str(run_dir / "policies"),
+                                                           "tensorboard_dir": str(run_dir / TENSORBOARD_DIR),
                                                            **profile}
     return {
         **bridge,

@@ -93,6 +93,9 @@ class LearnerNode(Node):
                                       min_value=1, max_value=10_000_000)
         profile_name = declare(self, "learner_profile", DEFAULT_PROFILE, "how policies learn and are scored: "
                                f"one of {', '.join(PROFILES)} (learner_node/profiles.py)")
+        tensorboard_dir = declare(self, "tensorboard_dir", "", "where each Train goal writes its training curves "
+                                  "(TensorBoard events and a CSV, in a folder named after its output policy; "
+                                  "learner_node/scalars.py); empty: nowhere")
         recipe = declare(self, "fine_tuning", "", "another way for a Train goal to start from a stored policy, "
                          "where the profile allows one (glocal_ros: any of "
                          f"{', '.join(FINE_TUNING_RECIPES)}); empty: the profile's own")
@@ -108,7 +111,8 @@ class LearnerNode(Node):
         self.policies = PolicyRegistry(PolicyStore(Path(policy_dir)), [PolicyStore(profile.shipped_priors())], seed)
         self.sim = SimClient(self, timeout_sec=self.sim_timeout)
         self.trainer = Trainer(self.sim, self.policies, Path(policy_dir) / ".checkpoints", seed, checkpoint_interval,
-                               profile=profile, fine_tuning=fine_tuning)
+                               profile=profile, fine_tuning=fine_tuning,
+                               tensorboard_dir=Path(tensorboard_dir) if tensorboard_dir else None)
         # Whoever holds sim_lock runs the queued jobs: a training goal between
         # its steps, otherwise the requester itself.
         self.sim_lock = threading.Lock()
@@ -297,6 +301,8 @@ class LearnerNode(Node):
             step_budget=spec.step_budget, learner_steps=self.trainer.total_steps, episodes=progress.episodes,
             recent_success_rate=recent_success_rate, latest_score=latest_score,
             env_steps_per_second=float(progress.steps_per_second),
+            mean_episode_return=float(progress.mean_episode_return), actor_loss=float(progress.actor_loss),
+            critic_loss=float(progress.critic_loss), entropy_coefficient=float(progress.entropy_coefficient),
         )
         message.header.stamp = self.get_clock().now().to_msg()
         self.progress_pub.publish(message)

@@ -49,11 +49,14 @@ Choices:
   one (``learner_node.updates``): SB3's updates, a step later.
 - A checkpoint's files are this loop's (``CHECKPOINT_FORMAT``): one of the
   SB3 loop before it is refused, naming what differs, and never resumed.
+- With a ``tensorboard_dir``, every progress report and evaluation of a goal
+  is also written to its TensorBoard and CSV curves (``learner_node.scalars``).
 """
 
 from __future__ import annotations
 
 import json
+import math
 import re
 import shutil
 import time
@@ -75,6 +78,7 @@ from learner_node.policies import RANDOM_POLICY, PolicyRegistry, deterministic_a
 from learner_node.policy_store import PolicyRecord, check_name
 from learner_node.profiles import DEFAULT_PROFILE, PROFILES, LearnerProfile
 from learner_node.sac_settings import FineTuning, seed_keys
+from learner_node.scalars import RECENT_EPISODES, GoalScalars
 from learner_node.updates import OverlappedUpdates, TransitionRing, sample_actions
 from learner_node.vec_env import BatchVecEnv, TaskCycle
 
@@ -155,6 +159,16 @@ class TrainProgress:
     recent_success_rate: float
     latest_score: float  # -1 before the first evaluation
     steps_per_second: float
+    mean_episode_return: float = math.nan  # of the same episodes as recent_success_rate
+    actor_loss: float = math.nan  # the last gradient step's (NaN before the first)
+    critic_loss: float = math.nan
+    entropy_coefficient: float = math.nan
+
+    def scalars(self) -> dict[str, float]:
+        """The report as ``learner_node.scalars`` tags it."""
+        return {"rollout/success_rate": self.recent_success_rate, "rollout/ep_rew_mean": self.mean_episode_return,
+                "train/actor_loss": self.actor_loss, "train/critic_loss": self.critic_loss,
+                "train/ent_coef": self.entropy_coefficient, "time/fps": self.steps_per_second}
 
 
 @dataclass
@@ -184,12 +198,15 @@ class Trainer:
 
     ``fine_tuning``: how a goal starts from a stored policy, the profile's own unless given (``bench
     transfer`` compares recipes: ``LearnerProfile.with_recipe`` says which a profile allows).
+    ``tensorboard_dir``: where each goal writes its training curves (``learner_node.scalars``); None: nowhere.
     """
 
     def __init__(self, envs: BatchStepper, policies: PolicyRegistry, checkpoint_root: Path, seed: int = 0,
                  checkpoint_interval: int = 5_000, progress_interval_sec: float = 1.0,
-                 profile: LearnerProfile = PROFILES[DEFAULT_PROFILE], fine_tuning: FineTuning | None = None):
+                 profile: LearnerProfile = PROFILES[DEFAULT_PROFILE], fine_tuning: FineTuning | None = None,
+                 tensorboard_dir: Path | None = None):
         self.envs = envs
+        self.tensorboard_dir = None if tensorboard_dir is None else Path(tensorboard_dir)
         self.profile = profile
         self.fine_tuning = fine_tuning or profile.fine_tuning
         self.policies = policies
@@ -335,7 +352,9 @@ class _Goal:
         self.last_checkpoint = self.state.steps_used
         self.last_progress = 0.0
         self.started = time.monotonic()
-        self.recent: deque[bool] = deque(maxlen=50)  # successes of the last episodes, for progress
+        self.recent: deque[bool] = deque(maxlen=RECENT_EPISODES)  # successes of the last episodes, for progress
+        self.recent_returns: deque[float] = deque(maxlen=RECENT_EPISODES)
+        self.scalars: GoalScalars | None = None
         self.stop_reason = ""
         self.observations: np.ndarray | None = None  # the envs' latest, which the next actions act on
 
@@ -475,6 +494,16 @@ class _Goal:
         return policy.unscale_action(stored), stored
 
     def run(self) -> TrainOutcome:
+        if self.trainer.tensorboard_dir is not None:
+            self.scalars = GoalScalars(self.trainer.tensorboard_dir / self.spec.output_policy)
+        try:
+            return self.train()
+        finally:
+            if self.scalars is not None:
+                self.scalars.close()
+
+    def train(self) -> TrainOutcome:
+        """The goal's first check, its steps, then its outcome."""
         spec, state, trainer = self.spec, self.state, self.trainer
         if spec.stop_when_learned and spec.task and state.score is None:
             # "Train until S > B" checks first: a policy that passes already is not trained.
@@ -541,19 +570,31 @@ class _Goal:
             episode = self.vec_env.finished.popleft()
             state.episodes.append(asdict(episode))
             self.recent.append(episode.success)
+            self.recent_returns.append(episode.episode_return)
         now = time.monotonic()
         if now - self.last_progress >= self.trainer.progress_interval_sec:
             self.last_progress = now
-            self.on_progress(TrainProgress(steps, spec.step_budget, len(state.episodes),
-                                           float(np.mean(self.recent)) if self.recent else 0.0,
-                                           state.score["successes"] if state.score else -1.0,
-                                           (steps - self.resumed) / max(now - self.started, 1e-9)))
+            self.report_progress(steps, now)
         self.stop_reason = self.should_stop()
         keep_going = (not self.stop_reason and not (spec.stop_when_learned and state.learned)
                       and not (spec.episode_limit and len(state.episodes) >= spec.episode_limit))
         if keep_going:  # the step that stops the goal owes no updates (SB3's loop returns before them)
             self.updates.owe(self.vec_env.num_envs, critic_only=steps <= state.critic_warmup)
         return keep_going
+
+    def report_progress(self, steps: int, now: float) -> None:
+        """A progress report to the owner, and to the goal's curves."""
+        info = self.updates.last_info()  # waits for the last step's gradient steps
+        progress = TrainProgress(
+            steps, self.spec.step_budget, len(self.state.episodes),
+            float(np.mean(self.recent)) if self.recent else 0.0,
+            self.state.score["successes"] if self.state.score else -1.0,
+            (steps - self.resumed) / max(now - self.started, 1e-9),
+            float(np.mean(self.recent_returns)) if self.recent_returns else math.nan,
+            info.actor_loss, info.critic_loss, info.entropy_coefficient)
+        self.on_progress(progress)
+        if self.scalars is not None:
+            self.scalars.write(steps, progress.scalars())
 
     def cut_episodes(self) -> None:
         """End every running episode and start new ones, as a goal resumed from a checkpoint here starts.
@@ -577,6 +618,9 @@ class _Goal:
         state.learned = passes_threshold(score.successes, spec.threshold)
         state.steps_at_last_eval = steps
         self.on_evaluation(score, steps)
+        if self.scalars is not None:
+            self.scalars.write(steps, {"eval/successes": score.successes,
+                                       "eval/success_rate": score.successes / score.episodes})
 
     def save_checkpoint(self) -> None:
         """Model and buffer under new names, then the json naming them: a kill leaves the last whole one."""

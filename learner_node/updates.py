@@ -37,6 +37,7 @@ SBX, and nothing else:
 
 from __future__ import annotations
 
+import math
 from contextlib import contextmanager
 from functools import partial
 from typing import BinaryIO, Iterator, NamedTuple
@@ -49,7 +50,7 @@ from learner_node.replay_buffer import TRANSITION_ARRAYS, Experience, read_array
 
 
 class UpdateInfo(NamedTuple):
-    """The last gradient step's losses and entropy coefficient (zeros before the first)."""
+    """The last gradient step's losses and entropy coefficient."""
 
     actor_loss: float
     critic_loss: float
@@ -232,6 +233,8 @@ class OverlappedUpdates:
         self.pending: list[Experience] = []
         self.info = UpdateInfo(0.0, 0.0, 0.0, 0.0)
         self._info_arrays = None
+        self.gradient_steps = 0  # paid by this goal
+        self.actor_steps = 0  # of them, those that updated the actor too (not critic-only)
 
     def __enter__(self) -> "OverlappedUpdates":
         return self
@@ -295,12 +298,20 @@ class OverlappedUpdates:
             return
         policy.qf_state, policy.actor_state, model.ent_coef_state, model.key, self._info_arrays = result
         model._n_updates += steps
+        self.gradient_steps += steps
+        self.actor_steps += steps - critic_only
 
     def last_info(self) -> UpdateInfo:
-        """The last paid gradient step's losses (waits for its call to finish)."""
+        """The last paid gradient step's losses and entropy coefficient, NaN where this goal has none yet:
+        everything before its first gradient step, the actor's and the coefficient's losses before its first
+        step that was not critic-only. Waits for the last call to finish."""
         if self._info_arrays is not None:
             self.info = UpdateInfo(*(float(value) for value in self._info_arrays))
             self._info_arrays = None
+        if not self.gradient_steps:
+            return UpdateInfo(math.nan, math.nan, math.nan, math.nan)
+        if not self.actor_steps:
+            return self.info._replace(actor_loss=math.nan, entropy_coefficient_loss=math.nan)
         return self.info
 
     @contextmanager

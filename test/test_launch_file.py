@@ -137,7 +137,8 @@ def test_the_issue_example_starts_the_graph_as_glocal_ros_launch_does(launch_fil
     assert plan == {
         "recorder_node": {"output": str(out / "bag"), "use_sim_time": True},
         "sim_node": {"seed": 0, "use_sim_time": True},
-        "learner_node": {"seed": 0, "policy_dir": str(out / "policies")},
+        "learner_node": {"seed": 0, "policy_dir": str(out / "policies"),
+                         "tensorboard_dir": str(out / "tensorboard")},
         "curriculum_node": {"strategy": "glocal", "seed": 0, "state_dir": str(out / "curriculum")},
     }
     # What glocal-ros launch gives the same run (glocal_app.launch builds its processes from it).
@@ -254,6 +255,7 @@ def test_pairs_start_every_pair_in_its_namespace_as_glocal_ros_launch_plans_them
     assert plan["curriculum_node"]["parallel_locals"] is True
     assert plan["recorder_node"]["pair_namespaces"] == "pair0,pair1"
     assert {plan[f"pair{i}/learner_node"]["policy_dir"] for i in range(2)} == {str(out / "policies")}
+    assert {plan[f"pair{i}/learner_node"]["tensorboard_dir"] for i in range(2)} == {str(out / "tensorboard")}
     assert json.loads((out / "run.json").read_text())["pairs"] == 2
 
 

@@ -13,6 +13,7 @@ wall-clock); and report the run.
 
 from __future__ import annotations
 
+import math
 import os
 import subprocess
 import sys
@@ -149,3 +150,34 @@ def test_use_sim_time_puts_the_sim_on_its_own_clock(namespaced_run):
     # time source subscribes to), so it records sim time; on /clock it would read 0 throughout.
     recorded = log_times(run_dir / "bag")
     assert 0 < max(recorded) < WALL_CLOCK_SEC
+
+
+def test_the_runs_training_curves_are_the_bags_numbers(namespaced_run):
+    """``RUN_DIR/tensorboard`` as ``tensorboard --logdir`` lists it: a run per Train goal, whose progress and
+    evaluation scalars are those of the goal's messages in the bag."""
+    from tensorboard.backend.event_processing.event_multiplexer import EventMultiplexer
+
+    run_dir, _, result, _ = namespaced_run
+    assert result.returncode == 0, result.stdout + result.stderr
+    assert f"--logdir {run_dir / 'tensorboard'}" in result.stdout, "the launch says how to open them"
+    curves = EventMultiplexer().AddRunsFromDirectory(str(run_dir / "tensorboard"))
+    curves.Reload()
+    messages = bag_messages(run_dir / "bag")
+    goals = {a.output_policy for a in messages[f"{NAMESPACE}/glocal/task_assignment"] if a.output_policy}
+    assert goals and set(curves.Runs()) == goals
+
+    def scalars(goal: str, tag: str) -> list[tuple[int, float]]:
+        tags = curves.Runs()[goal]["scalars"]
+        return [(event.step, event.value) for event in curves.Scalars(goal, tag)] if tag in tags else []
+
+    progress = messages[f"{NAMESPACE}/glocal/training_progress"]
+    assert progress, "no goal reported progress"
+    for goal in goals:
+        reports = [m for m in progress if m.output_policy == goal]
+        assert scalars(goal, "time/fps") == [(m.goal_steps, m.env_steps_per_second) for m in reports]
+        assert scalars(goal, "rollout/success_rate") == [(m.goal_steps, m.recent_success_rate) for m in reports]
+        assert scalars(goal, "train/critic_loss") == [(m.goal_steps, m.critic_loss) for m in reports
+                                                      if not math.isnan(m.critic_loss)]
+        scores = [score.successes for m in messages[f"{NAMESPACE}/glocal/evaluations"]
+                  if m.policy == goal and m.purpose == "train" for score in m.scores]
+        assert [value for _, value in scalars(goal, "eval/successes")] == scores

@@ -46,6 +46,7 @@ PIP_KEYS: dict[str, str | None] = {
     "mcap-ros2-support": None,
     "foxglove-sdk": None,
     "matplotlib": "python3-matplotlib",
+    "tensorboard": "python3-tensorboard-pip",
     "tqdm": "python3-tqdm",
     "pyyaml": "python3-yaml",
     "ray": None,
@@ -65,8 +66,10 @@ PIP_NAMES: dict[str, str] = {
     "flax": "flax", "optax": "optax", "rosbags": "rosbags", "trimesh": "trimesh", "mcap": "mcap",
     "fast_simplification": "fast-simplification", "threadpoolctl": "threadpoolctl", "foxglove": "foxglove-sdk",
     "ray": "ray", "pytest": "pytest", "hypothesis": "hypothesis", "websockets": "websockets",
-    "catkin_pkg": "catkin-pkg",
+    "catkin_pkg": "catkin-pkg", "tensorboard": "tensorboard",
 }
+#: Modules the code needs without naming them: ``torch.utils.tensorboard`` writes through tensorboard.
+IMPORTED_THROUGH_ANOTHER = {"tensorboard"}
 #: Third-party Python import -> rosdep key (None: rosdistro has no key; package.xml's comment says so).
 PYTHON_KEYS: dict[str, str | None] = {module: PIP_KEYS[pip] for module, pip in PIP_NAMES.items()}
 #: What the tests need beside pytest's plugins, by pip name: what the tests import, and pytest-timeout.
@@ -132,7 +135,7 @@ def test_every_python_dependency_has_its_rosdep_key_or_is_named_without_one(pack
 
 def test_no_declared_dependency_is_left_over(package):
     """A key that nothing imports any more goes (the launch CLI and the tests' keys aside)."""
-    used = set(imported()) | {"ros2launch"}
+    used = set(imported()) | IMPORTED_THROUGH_ANOTHER | {"ros2launch"}
     expected_keys = {key for name, key in PYTHON_KEYS.items() if name in used}
     leftover = {name for name in declared(package) if name not in used and name not in expected_keys}
     assert leftover == set()
