@@ -25,8 +25,11 @@ bench transfer`` (parent experience, inherited task inputs:
 ``learner_node.sac_settings``). Its fine-tuning may be swapped for another
 recipe of ``FINE_TUNING_RECIPES`` (that is what bench transfer compares).
 
-``paper``, Stable Baselines 2's SAC with its defaults, as the paper ran it
-(``shared/design/PAPER_LEARNER.md`` gives the source lines):
+``paper``, Stable Baselines 2's SAC with its defaults, as the paper ran it:
+the paper (section "Robot Environment Setup") used "the implementation from
+Stable Baselines", the SAC of hill-a/stable-baselines (here SB2), and sets
+none of its hyperparameters, so the profile follows that SAC's defaults and
+behaviour:
 - gamma 0.99, buffer 50k, batch 64, [64, 64] ReLU, Glorot-uniform kernels
   and zero biases, learning rate 3e-4, tau 0.005, entropy coefficient
   learned from 1.0 towards a target entropy of -5;

@@ -1,5 +1,6 @@
 """Learner profiles (``learner_node.profiles``): ``paper`` item by item against Stable Baselines 2's SAC
-defaults (shared/design/PAPER_LEARNER.md), ``glocal_ros`` as the project's default, how a goal of each starts,
+defaults (hill-a/stable-baselines, the implementation the paper's "Robot Environment Setup" names),
+``glocal_ros`` as the project's default, how a goal of each starts,
 and that ``learner/evaluate``'s policy scores as a goal's check before its first step, on the same episodes."""
 
 import json
