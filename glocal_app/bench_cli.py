@@ -56,7 +56,7 @@ def cmd_bench_learner(args: argparse.Namespace) -> int:
 
     env_counts = [int(n) for n in args.envs.split(",")]
     rows = run_learner_bench(env_counts, args.steps, args.rounds, learner_node=not args.no_learner_node,
-                             profiles=args.profiles)
+                             profiles=args.profiles, curves=args.curves)
     report = learner_bench_report(rows, command_line(), args.steps, args.rounds)
     return write_bench_report(report, args.out)
 
@@ -297,6 +297,9 @@ def add_bench_commands(commands) -> None:
     _add_rate_arguments(bench_learner, envs="1,2,4", steps=300)
     bench_learner.add_argument("--no-learner-node", action="store_true",
                                help="leave out the learner_node process (its Train action) column")
+    bench_learner.add_argument("--curves", action="store_true",
+                               help="add the in-process goal writing its training curves (TensorBoard, CSV) at "
+                                    "every report: what the curves cost")
     bench_learner.add_argument("--out", type=Path, default=Path("bench/results/learner.md"))
     bench_learner.add_argument("--profiles", type=profile_list, default=list(PROFILES),
                                help="comma-separated learner profiles, each measured on its own prior "

@@ -88,7 +88,8 @@ def cmd_launch(args: argparse.Namespace) -> int:
     foxglove = None if args.foxglove is None else FoxgloveEndpoint(
         args.foxglove, *(() if args.foxglove_host is None else (args.foxglove_host,)))
     graph = dict(namespace=args.namespace, use_sim_time=args.use_sim_time, learner_profile=args.profile,
-                 foxglove=foxglove, pairs=args.pairs, remote_pairs=args.remote_pairs)
+                 foxglove=foxglove, pairs=args.pairs, remote_pairs=args.remote_pairs,
+                 tensorboard_dir=None if args.tensorboard is None else args.tensorboard.expanduser().resolve())
     if args.watchdog is None:
         return launch(args.strategy, args.preset, args.seed, args.out, **graph)
     return launch(args.strategy, args.preset, args.seed, args.out, watchdog_sec=args.watchdog, **graph)
@@ -137,10 +138,13 @@ def add_graph_commands(commands) -> None:
     launch = commands.add_parser("launch", help="run the whole graph as processes on the ROS_DOMAIN_ID you set, "
                                  "else on a free one; the same command resumes an interrupted run")
     launch.add_argument("--strategy", default="glocal", choices=STRATEGY_NAMES)
-    launch.add_argument("--preset", default="demo", help="a parameter file of assets/params: smoke, demo, paper")
+    launch.add_argument("--preset", default="demo", help="a parameter file of assets/params: smoke, demo, bench, paper (default: demo)")
     launch.add_argument("--seed", type=int, default=0)
     launch.add_argument("--out", type=Path, required=True,
-                        help="run directory: gets bag/, policies/, curriculum/, logs/ and report/")
+                        help="run directory: gets bag/, policies/, curriculum/, tensorboard/, logs/ and report/")
+    launch.add_argument("--tensorboard", type=Path, default=None, metavar="DIR",
+                        help="write every Train goal's training curves (TensorBoard events, CSV) in DIR/<goal> "
+                             "(default: RUN_DIR/tensorboard)")
     launch.add_argument("--watchdog", type=positive_float, default=None, metavar="SEC",
                         help="stop the graph (resumable) when nothing moves for SEC seconds (default: a minute)")
     add_graph_arguments(launch)

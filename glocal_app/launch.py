@@ -69,7 +69,7 @@ from rclpy.signals import SignalHandlerOptions
 
 from glocal_app.arguments import EXIT_FAILED, EXIT_INTERRUPTED, EXIT_STALLED
 from glocal_app.processes import (FoxgloveEndpoint, NodeProcess, check_foxglove_endpoint, check_pairs, check_run_dir,
-                                   claim_run_dir, isolated_environment, namespace_arguments, new_bag_path,
+                                   check_writable_directory, claim_run_dir, isolated_environment, namespace_arguments, new_bag_path,
                                    node_namespace, node_path, normalize_namespace, pair_namespaces, preset_file,
                                    preset_parameters, recorded_run_settings, remote_pair_indices, run_nodes,
                                    run_parameters, run_settings, split_node_path, PAIR_NAMESPACE, PAIR_NODES,
@@ -238,16 +238,19 @@ def check_graph(node, watchdog: Watchdog, progress: Progress, started: Sequence[
 def launch(strategy: str, preset: str, seed: int, run_dir: Path, startup_timeout: float = 120.0,
            report: bool = True, watchdog_sec: float = DEFAULT_WATCHDOG_SEC, namespace: str = "",
            use_sim_time: bool = False, step_budget: int | None = None, learner_profile: str | None = None,
-           foxglove: FoxgloveEndpoint | None = None, pairs: int = 1, remote_pairs: int = 0) -> int:
+           foxglove: FoxgloveEndpoint | None = None, pairs: int = 1, remote_pairs: int = 0,
+           tensorboard_dir: Path | None = None) -> int:
     """Run (or resume) one run in ``run_dir``; the curriculum's exit code, ``EXIT_INTERRUPTED`` on Ctrl-C or
     ``EXIT_STALLED``.
 
     ``step_budget`` replaces the preset's training-step budget, ``learner_profile`` its learner
     profile; ``foxglove`` starts foxglove_bridge_node there, before the other nodes; ``pairs`` sim/learner
     pairs train GloCAL's local tasks at once, the last ``remote_pairs`` of them started on other hosts
-    (``serve_pair``; the launch waits for them on the user's ROS_DOMAIN_ID). Bad input (an unknown preset or
+    (``serve_pair``; the launch waits for them on the user's ROS_DOMAIN_ID); the learners here write their
+    goals' training curves in ``tensorboard_dir`` (default ``RUN_DIR/tensorboard``; a remote pair's, in its
+    host's ``RUN_DIR/tensorboard``). Bad input (an unknown preset or
     profile, a budget below one evaluation interval, an invalid namespace or ROS_DOMAIN_ID, another run's
-    directory, a Foxglove port that is taken or invalid, pairs that ``check_pairs`` refuses but for the
+    directory, a Foxglove port that is taken or invalid, a ``tensorboard_dir`` that cannot be written, pairs that ``check_pairs`` refuses but for the
     machine's cores, which the command line checks, remote pairs without a ROS_DOMAIN_ID set, a node of the
     plan already running on the user's domain: ``check_names_free``) raises ``ValueError`` before anything
     starts.
@@ -260,6 +263,9 @@ def launch(strategy: str, preset: str, seed: int, run_dir: Path, startup_timeout
     namespace = normalize_namespace(namespace)
     if foxglove is not None:
         check_foxglove_endpoint(foxglove)
+    if tensorboard_dir is not None:
+        check_writable_directory(tensorboard_dir, "--tensorboard")
+    curves = tensorboard_dir or run_dir / TENSORBOARD_DIR
     remote = {PAIR_NAMESPACE.format(index) for index in remote_pair_indices(pairs, remote_pairs)}
     *graph, last = [path for path in run_nodes(foxglove, pairs) if split_node_path(path)[0] not in remote]
     settings = run_settings(strategy, preset, seed, step_budget, learner_profile, pairs)
@@ -271,7 +277,7 @@ def launch(strategy: str, preset: str, seed: int, run_dir: Path, startup_timeout
     where += f", {pairs} sim/learner pairs" if pairs > 1 else ""
     print(f"{'resuming' if resumed else 'launching'} preset {preset}, strategy {strategy}, seed {seed}{where} "
           f"on {domain.describe()}; logs in {logs}", flush=True)
-    print(f"training curves: {Path(sys.executable).parent / 'tensorboard'} --logdir {run_dir / TENSORBOARD_DIR}",
+    print(f"training curves: {Path(sys.executable).parent / 'tensorboard'} --logdir {curves}",
           flush=True)
 
     progress = Progress()
@@ -279,7 +285,8 @@ def launch(strategy: str, preset: str, seed: int, run_dir: Path, startup_timeout
     pairs_here = pair_namespaces(pairs)
     listen_for_progress(node, progress, watchdog, pairs_here)
     started: list[NodeProcess] = []
-    plan = run_parameters(strategy, seed, run_dir, bag, use_sim_time, step_budget, learner_profile, foxglove, pairs)
+    plan = run_parameters(strategy, seed, run_dir, bag, use_sim_time, step_budget, learner_profile, foxglove, pairs,
+                          curves)
 
     def start(path: str) -> NodeProcess:
         process = NodeProcess(split_node_path(path)[1], logs, plan[path], params_file, env, name=path,

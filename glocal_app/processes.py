@@ -38,6 +38,7 @@ import signal
 import socket
 import subprocess
 import sys
+import tempfile
 import time
 from dataclasses import dataclass
 from pathlib import Path
@@ -260,14 +261,26 @@ def preset_parameters(preset: str, node: str, params_dir: Path | None = None) ->
     return dict(document.get(f"/**/{node}", {}).get("ros__parameters", {}))
 
 
+def check_writable_directory(folder: Path, option: str) -> None:
+    """``ValueError`` naming ``option`` unless ``folder`` can be made and written to (it is made)."""
+    try:
+        folder.mkdir(parents=True, exist_ok=True)
+        with tempfile.TemporaryFile(dir=folder):
+            pass
+    except OSError as error:
+        raise ValueError(f"{option} {folder}: not a directory this user can write to ({error.strerror})") from None
+
+
 def run_parameters(strategy: str, seed: int, run_dir: Path, bag: Path, use_sim_time: bool = False,
                    step_budget: int | None = None, learner_profile: str | None = None,
-                   foxglove: FoxgloveEndpoint | None = None, pairs: int = 1) -> dict[str, dict[str, object]]:
+                   foxglove: FoxgloveEndpoint | None = None, pairs: int = 1,
+                   tensorboard_dir: Path | None = None) -> dict[str, dict[str, object]]:
     """What each node of a run gets on top of its preset, keyed by ``node_path``, in ``run_nodes`` order.
 
     ``use_sim_time`` is given to the nodes of ``SIM_TIME_NODES`` only, and only when on: a node
     without it keeps whatever its preset says. ``step_budget`` (training steps of the whole run)
     and ``learner_profile`` replace the preset's when given; ``foxglove`` adds the bridge, serving there.
+    Every learner writes its goals' training curves in ``tensorboard_dir`` (default ``RUN_DIR/tensorboard``).
     ``pairs`` above one: every pair's sim and learner get the same seed and the one policy directory;
     the recorder and the curriculum get the pairs' namespaces (relative: they resolve under the run's),
     and the curriculum ``parallel_locals``.
@@ -282,7 +295,8 @@ def run_parameters(strategy: str, seed: int, run_dir: Path, bag: Path, use_sim_t
     for namespace in namespaces:
         pair_nodes[node_path(namespace, "sim_node")] = {"seed": seed, **sim_time}
         pair_nodes[node_path(namespace, "learner_node")] = {"seed": seed, "policy_dir": str(run_dir / "policies"),
-                                                           "tensorboard_dir": str(run_dir / TENSORBOARD_DIR),
+                                                           "tensorboard_dir": str(tensorboard_dir or
+                                                                                  run_dir / TENSORBOARD_DIR),
                                                            **profile}
     return {
         **bridge,

@@ -50,12 +50,23 @@ def test_bench_learner_without_learner_node_shows_a_dash():
         ["paper", "2", "80.0", "72.0 (2)", "-", "144.0", "0.90", "-", "0.50"]  # the graph is via sim_node here
 
 
+def test_bench_learner_reports_what_the_curves_cost():
+    row = LearnerBenchRow("glocal_ros", 4, 300.0, 280.0, None, 2, ((300.0, 310.0), (280.0, 281.0), (800.0, 790.0),
+                                                                   (291.0, 304.0)), env_floor=795.0, with_curves=297.5)
+    assert row.variant_names == ("in-process", "via sim_node", "env floor", "in-process with curves")
+    report = learner_bench_report([row], "glocal-ros bench learner --curves", steps=10, rounds=2)
+    (line,) = [line for line in report.splitlines() if line.startswith("| glocal_ros | 4 | 300.0 | 297.5")]
+    assert [cell.strip() for cell in line.strip("|").split("|")] == \
+        ["glocal_ros", "4", "300.0", "297.5", "0.992", "0.970, 0.981", "0.11", "0.011%"]  # 4/297.5 - 4/300 s
+    assert "in-process with curves 291.0, 304.0" in report
+
+
 def test_bench_learner_command_line():
     args = build_parser().parse_args(["bench", "learner", "--envs", "1,2", "--steps", "100", "--rounds", "2",
                                       "--no-learner-node", "--out", "x.md"])
     assert args.func is cmd_bench_learner
-    assert (args.envs, args.steps, args.rounds, args.no_learner_node, args.out, args.profiles) == \
-        ("1,2", 100, 2, True, Path("x.md"), ["glocal_ros", "paper"])
+    assert (args.envs, args.steps, args.rounds, args.no_learner_node, args.out, args.profiles, args.curves) == \
+        ("1,2", 100, 2, True, Path("x.md"), ["glocal_ros", "paper"], False)
     with pytest.raises(SystemExit):
         build_parser().parse_args(["bench", "learner", "--profiles", "glocal_ros,sb2"])
 

@@ -150,6 +150,15 @@ def test_launch_refuses_a_bad_or_taken_foxglove_port_before_anything_starts(tmp_
             assert "Traceback" not in result.stderr and not (tmp_path / "run").exists()
 
 
+def test_launch_refuses_a_tensorboard_directory_it_cannot_write_before_anything_starts(tmp_path):
+    (tmp_path / "a-file").write_text("")
+    result = run_cli("launch", "--preset", "smoke", "--out", str(tmp_path / "run"),
+                     "--tensorboard", str(tmp_path / "a-file" / "curves"))
+    assert result.returncode == 2, result.stderr
+    assert "--tensorboard" in result.stderr and "not a directory this user can write to" in result.stderr
+    assert "Traceback" not in result.stderr and not (tmp_path / "run").exists()
+
+
 def test_launch_and_experiment_refuse_bad_pairs_before_anything_starts(tmp_path):
     import os
 

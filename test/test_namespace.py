@@ -18,6 +18,7 @@ import os
 import subprocess
 import sys
 import threading
+from pathlib import Path
 
 import pytest
 from glocal_interfaces.msg import CurriculumState, EpisodeRecord
@@ -84,16 +85,22 @@ def log_times(bag) -> list[float]:
         return [log_time * 1e-9 for _, log_time, _ in reader.messages()]
 
 
+def curves_dir(run_dir: Path) -> Path:
+    return run_dir.parent / "curves"
+
+
 @pytest.fixture(scope="module")
 def namespaced_run(tmp_path_factory):
-    """The smoke run under /robot1 on a domain id reserved here and set as the user would set it."""
+    """The smoke run under /robot1 on a domain id reserved here and set as the user would set it, its training
+    curves beside its run directory (``curves_dir``)."""
     run_dir = tmp_path_factory.mktemp("namespaced") / "run"
     # Held by the test for the whole run: no other run or test on this machine takes the domain.
     domain_id, lock = reserve_domain_id()
     listener = Listener(domain_id)
     try:
         command = [sys.executable, "-m", "glocal_app.cli", "launch", "--preset", "smoke", "--seed", "2",
-                   "--namespace", "robot1", "--use-sim-time", "--out", str(run_dir)]
+                   "--namespace", "robot1", "--use-sim-time", "--out", str(run_dir),
+                   "--tensorboard", str(curves_dir(run_dir))]
         result = subprocess.run(command, capture_output=True, text=True, timeout=RUN_SEC, cwd=REPO,
                                 env={**os.environ, "ROS_DOMAIN_ID": str(domain_id)})
     finally:
@@ -153,14 +160,15 @@ def test_use_sim_time_puts_the_sim_on_its_own_clock(namespaced_run):
 
 
 def test_the_runs_training_curves_are_the_bags_numbers(namespaced_run):
-    """``RUN_DIR/tensorboard`` as ``tensorboard --logdir`` lists it: a run per Train goal, whose progress and
+    """``--tensorboard DIR`` as ``tensorboard --logdir`` lists it: a run per Train goal, whose progress and
     evaluation scalars are those of the goal's messages in the bag."""
     from tensorboard.backend.event_processing.event_multiplexer import EventMultiplexer
 
     run_dir, _, result, _ = namespaced_run
     assert result.returncode == 0, result.stdout + result.stderr
-    assert f"--logdir {run_dir / 'tensorboard'}" in result.stdout, "the launch says how to open them"
-    curves = EventMultiplexer().AddRunsFromDirectory(str(run_dir / "tensorboard"))
+    assert f"--logdir {curves_dir(run_dir)}" in result.stdout, "the launch says how to open them"
+    assert not (run_dir / "tensorboard").exists()
+    curves = EventMultiplexer().AddRunsFromDirectory(str(curves_dir(run_dir)))
     curves.Reload()
     messages = bag_messages(run_dir / "bag")
     goals = {a.output_policy for a in messages[f"{NAMESPACE}/glocal/task_assignment"] if a.output_policy}

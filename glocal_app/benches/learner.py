@@ -11,7 +11,13 @@ one compute thread) runs on N envs three ways:
   what learner_node does for a Train goal;
 - learner_node: a real learner_node process, sent the goal on its Train
   action, timed by the stamps and step counts of its TrainingProgress
-  messages (optional, ``learner_node=False`` leaves it out).
+  messages (optional, ``learner_node=False`` leaves it out);
+- in-process with curves (optional, ``curves=True``): the in-process goal
+  with a ``tensorboard_dir``, so that every progress report is also written
+  to its TensorBoard events and CSV (``learner_node.scalars``). The bench
+  reports (and writes) at every vector step, learner_node about once a
+  second: at R env steps/s the bench writes R / N times as often as a
+  learner, so its ratio to in-process is a worst case for the learner's.
 
 The sim_node runs with its defaults (``workers`` one per core, at most N;
 viewer topics on) but for ``num_envs``, on a ROS domain of its own.
@@ -78,8 +84,9 @@ class LearnerBenchRow:
     through_ros: float  # env steps/s with SAC updates here, envs in sim_node
     learner_node: float | None  # env steps/s of a learner_node process's Train goal; None: not measured
     workers: int  # sim_node's worker processes
-    rounds: tuple[tuple[float, ...], ...] = ()  # every measurement, per variant
+    rounds: tuple[tuple[float, ...], ...] = ()  # every measurement, per variant (``variant_names``)
     env_floor: float | None = None  # env steps/s of the envs alone in this process, random actions
+    with_curves: float | None = None  # in-process with training curves written at every report; None: not measured
 
     @property
     def ratio(self) -> float:
@@ -88,6 +95,23 @@ class LearnerBenchRow:
     @property
     def learner_node_ratio(self) -> float | None:
         return None if self.learner_node is None else self.learner_node / self.in_process
+
+    @property
+    def variant_names(self) -> tuple[str, ...]:
+        """The variants of ``rounds``, in order."""
+        return ("in-process", "via sim_node", "env floor", *(("learner_node",) if self.learner_node is not None else ()),
+                *(("in-process with curves",) if self.with_curves is not None else ()))
+
+    @property
+    def curves_ratio(self) -> float | None:
+        return None if self.with_curves is None else self.with_curves / self.in_process
+
+    @property
+    def seconds_per_curves_write(self) -> float | None:
+        """What one write of the curves adds to a vector step (one write per step of N envs)."""
+        if self.with_curves is None:
+            return None
+        return self.num_envs / self.with_curves - self.num_envs / self.in_process
 
     @property
     def floor_ratio(self) -> float | None:
@@ -103,10 +127,11 @@ def warmup_steps(num_envs: int) -> int:
 
 def train_steps_per_second(envs: BatchStepper, policies: PolicyRegistry, work_dir: Path, output_policy: str,
                            num_envs: int, steps: int, seed: int = 0,
-                           profile: LearnerProfile = PROFILES[DEFAULT_PROFILE]) -> float:
+                           profile: LearnerProfile = PROFILES[DEFAULT_PROFILE],
+                           tensorboard_dir: Path | None = None) -> float:
     """Run one Train goal of ``warmup_steps + steps`` env steps; env steps/s over the timed part."""
     trainer = Trainer(envs, policies, work_dir / ".checkpoints", seed, checkpoint_interval=10**12,
-                      progress_interval_sec=0.0, profile=profile)
+                      progress_interval_sec=0.0, profile=profile, tensorboard_dir=tensorboard_dir)
     warmup = warmup_steps(num_envs)
     spec = TrainSpec(task=TASK, initial_policy=INITIAL_POLICY, output_policy=output_policy,
                      step_budget=warmup + steps, threshold=0.0, eval_episodes=1, eval_interval=0)
@@ -172,8 +197,8 @@ def _wait(future, timeout: float, what: str):
 
 
 def run_learner_bench(env_counts: Sequence[int], steps: int, rounds: int, learner_node: bool = True,
-                      log: Callable[[str], None] = print, profiles: Sequence[str] = (DEFAULT_PROFILE,)
-                      ) -> list[LearnerBenchRow]:
+                      log: Callable[[str], None] = print, profiles: Sequence[str] = (DEFAULT_PROFILE,),
+                      curves: bool = False) -> list[LearnerBenchRow]:
     from learner_node.sim_client import SimClient
     from sim_node.batch import BatchedEnvs
     from sim_node.grasp_env import GraspEnv
@@ -214,6 +239,10 @@ def run_learner_bench(env_counts: Sequence[int], steps: int, rounds: int, learne
                 waits.append(("learner_node's Train action", goals.ready))
                 variants.append(("learner_node", lambda name: goals.steps_per_second(
                     name, num_envs, steps, timeout=60 + 10 * (steps + warmup_steps(num_envs)))))
+            if curves:
+                variants.append(("in-process with curves", lambda name: train_steps_per_second(
+                    batch, policies, work, name, num_envs, steps, profile=learner_profile,
+                    tensorboard_dir=work / "tensorboard")))
             try:
                 for what, ready in waits:
                     deadline = time.monotonic() + 120
@@ -224,16 +253,18 @@ def run_learner_bench(env_counts: Sequence[int], steps: int, rounds: int, learne
                 runs: list[list[float]] = [[] for _ in variants]
                 for round_index in range(rounds):
                     for run, (name, measure) in zip(runs, variants):
-                        run.append(measure(f"bench-{name.split()[-1]}-{num_envs}-{round_index}"))
+                        run.append(measure(f"bench-{name.replace(' ', '-')}-{num_envs}-{round_index}"))
                         log(f"{profile} N={num_envs} round {round_index + 1}/{rounds}: {name} {run[-1]:.1f} steps/s")
-                medians = [statistics.median(run) for run in runs]
-                row = LearnerBenchRow(profile, num_envs, medians[0], medians[1], medians[3] if learner_node else None,
-                                      workers, tuple(tuple(run) for run in runs), env_floor=medians[2])
+                medians = {name: statistics.median(run) for run, (name, _) in zip(runs, variants)}
+                row = LearnerBenchRow(profile, num_envs, medians["in-process"], medians["through sim_node"],
+                                      medians.get("learner_node"), workers, tuple(tuple(run) for run in runs),
+                                      env_floor=medians["env floor"], with_curves=medians.get("in-process with curves"))
                 log(f"{profile} N={num_envs}: in-process {row.in_process:.1f} steps/s, through sim_node ({workers} workers) "
                     f"{row.through_ros:.1f}, ratio {row.ratio:.2f}"
                     + (f"; learner_node {row.learner_node:.1f}, ratio {row.learner_node_ratio:.2f}"
                        if learner_node else "")
-                    + f"; env floor {row.env_floor:.1f}, graph / floor {row.floor_ratio:.2f}")
+                    + f"; env floor {row.env_floor:.1f}, graph / floor {row.floor_ratio:.2f}"
+                    + (f"; in-process with curves {row.with_curves:.1f}, ratio {row.curves_ratio:.2f}" if curves else ""))
                 rows.append(row)
             finally:
                 batch.close()
@@ -280,9 +311,23 @@ def learner_bench_report(rows: Sequence[LearnerBenchRow], command: str, steps: i
               f"| {maybe(r.env_floor, 1)} | {r.ratio:.2f} | {maybe(r.learner_node_ratio, 2)} "
               f"| {maybe(r.floor_ratio, 2)} |" for r in rows]
     lines += ["", "Graph: learner_node, or via sim_node where learner_node was not measured."]
-    names = ("in-process", "via sim_node", "env floor", "learner_node")
+    curved = [r for r in rows if r.with_curves is not None]
+    if curved:
+        lines += ["", "Training curves (`--curves`): the in-process goal writing its TensorBoard events and CSV "
+                  "(`learner_node.scalars`) at every progress report, here every vector step: a worst case for "
+                  "learner_node, which writes about once a second. A write's cost: N / (with curves) - N / "
+                  "(in-process) seconds, from the medians; at one write a second it is that share of the "
+                  "learner's time.", "",
+                  "| profile | N envs | in-process | with curves | ratio with curves / in-process | "
+                  "ratios in the same round | a write (ms) | share at 1 Hz |",
+                  "| --- | ---: | ---: | ---: | ---: | --- | ---: | ---: |"]
+        lines += [f"| {r.profile} | {r.num_envs} | {r.in_process:.1f} | {r.with_curves:.1f} | {r.curves_ratio:.3f} | "
+                  + ", ".join(f"{v / base:.3f}" for v, base in zip(r.rounds[-1], r.rounds[0]))
+                  + f" | {1000 * r.seconds_per_curves_write:.2f} | {100 * r.seconds_per_curves_write:.3f}% |"
+                  for r in curved]
     lines += ["", "Every round, in order (env steps/s):", ""]
     for r in rows:
+        names = r.variant_names
         runs = "; ".join(f"{name} " + ", ".join(f"{v:.1f}" for v in run) for name, run in zip(names, r.rounds))
         paired = [", ".join(f"{v / base:.2f}" for v, base in zip(run, r.rounds[0])) for run in r.rounds[1:]]
         lines.append(f"- {r.profile}, N={r.num_envs}: {runs} (ratios in the same round: "
