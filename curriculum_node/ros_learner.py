@@ -45,10 +45,11 @@ from glocal_interfaces.srv import CopyPolicy, Evaluate
 from rclpy.callback_groups import ReentrantCallbackGroup
 from rclpy.node import Node
 
-from glocal_ros.curriculum.learner import EpisodeSummary, TrainRequest, TrainResult
+from glocal_ros.curriculum.learner import EpisodeSummary, TrainGoal, TrainResult
 from node_common import names
 from node_common.action_client import ActionClient
 from node_common.calls import ServerGone, ServerWatch, ServiceCallError, call_checked, wait_for_service
+from node_common.train_goal import goal_message
 
 #: How long to wait before offering a goal again that the learner rejected
 #: because it is busy (with a goal this node sent before it was restarted).
@@ -141,16 +142,8 @@ class RosLearner:
                 raise
             self.node.get_logger().info(f"{destination} exists already: kept")
 
-    def train(self, request: TrainRequest) -> TrainResult:
-        goal = Train.Goal(
-            task=request.task, episode_tasks=list(request.episode_tasks), episode_limit=request.episode_limit,
-            initial_policy=request.initial_policy,
-            output_policy=request.output_policy, step_budget=request.step_budget,
-            threshold=-1.0 if request.threshold is None else float(request.threshold),
-            eval_episodes=request.eval_episodes or 0, eval_interval=request.eval_interval,
-            stop_when_learned=request.stop_when_learned, keep_replay_buffer=request.keep_replay_buffer,
-            seed=-1 if request.seed is None else request.seed,
-        )
+    def train(self, request: TrainGoal) -> TrainResult:
+        goal = goal_message(request)
         while True:
             response = self._wait_result(self._send(goal))
             if response is not None:

@@ -1,4 +1,4 @@
-"""Argument types and options that several ``glocal-ros`` commands share, and the exit codes they return."""
+"""Argument types and options that several ``glocal-ros`` commands share (their exit codes: ``exit_codes``)."""
 
 from __future__ import annotations
 
@@ -9,17 +9,6 @@ from pathlib import Path
 from glocal_app.ray_runs import DEFAULT_CPUS_PER_RUN
 from glocal_ros.curriculum.codes import STRATEGY_NAMES
 from learner_node.profiles import DEFAULT_PROFILE, PROFILES
-
-EXIT_OK = 0
-#: A run, a check or a bench found a failure (a node failed, an object is not learnable, an answer was lost).
-EXIT_FAILED = 1
-#: Bad input: argparse's own code, and every ``ValueError`` a command raises about its arguments.
-EXIT_USAGE = 2
-#: The graph made no progress, or a node ended early: the same command resumes the run.
-EXIT_STALLED = 3
-#: Interrupted (Ctrl-C): what finished is kept, and the same command resumes.
-EXIT_INTERRUPTED = 130
-
 
 def command_line() -> str:
     """The command as the user typed it: benches write it beside what it produced."""

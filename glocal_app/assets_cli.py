@@ -7,8 +7,6 @@ import sys
 from pathlib import Path
 
 from glocal_app.arguments import (
-    EXIT_FAILED,
-    EXIT_OK,
     add_prior_store_argument,
     command_line,
     count,
@@ -16,6 +14,7 @@ from glocal_app.arguments import (
 )
 from glocal_app.bench_cli import write_bench_report
 from glocal_app.benches.transfer import INITIAL_POLICY, TransferSettings
+from glocal_app.exit_codes import EXIT_FAILED, EXIT_OK
 from glocal_ros.paths import objects_dir
 from glocal_ros.tasks import sorted_tasks
 from learner_node.sac_settings import DEFAULT_RECIPE

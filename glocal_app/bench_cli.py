@@ -8,9 +8,6 @@ import sys
 from pathlib import Path
 
 from glocal_app.arguments import (
-    EXIT_FAILED,
-    EXIT_INTERRUPTED,
-    EXIT_OK,
     add_experiment_arguments,
     add_prior_store_argument,
     add_profile_argument,
@@ -27,6 +24,7 @@ from glocal_app.benches.transfer import (
     TRANSFER_TASKS,
     TransferSettings,
 )
+from glocal_app.exit_codes import EXIT_FAILED, EXIT_INTERRUPTED, EXIT_OK
 from glocal_ros.sim_contract import DEFAULT_EVAL_ENVS
 from glocal_ros.tasks import parse_task_list
 from learner_node.profiles import DEFAULT_PROFILE, PROFILES
@@ -201,7 +199,7 @@ def cmd_bench_curriculum(args: argparse.Namespace) -> int:
     if not args.tabulate:
         check_bench(args.strategies, args.seeds, args.preset, args.out, args.budget, args.profile, keep)
         bench_inputs(args.out, args.merge)  # a --merge that holds no run is refused before the first run
-        from glocal_app.launch import experiment
+        from glocal_app.experiment import experiment
 
         def keep_and_restore() -> None:  # once the Ray cluster, if any, is checked too
             keep_finished_runs(args.out, keep)  # runs that finished before this command

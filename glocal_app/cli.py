@@ -24,8 +24,6 @@ import sys
 from pathlib import Path
 
 from glocal_app.arguments import (
-    EXIT_OK,
-    EXIT_USAGE,
     add_experiment_arguments,
     add_graph_arguments,
     add_pairs_arguments,
@@ -35,6 +33,7 @@ from glocal_app.arguments import (
 from glocal_app.assets_cli import add_assets_commands
 from glocal_app.bag_cli import add_bag_commands
 from glocal_app.bench_cli import add_bench_commands
+from glocal_app.exit_codes import EXIT_OK, EXIT_USAGE
 from glocal_app.nodes import NODES
 from glocal_app.policy_cli import add_policy_commands
 from glocal_app.processes import FOXGLOVE_HOST, FOXGLOVE_PORT, FoxgloveEndpoint
@@ -111,7 +110,7 @@ def cmd_foxglove_layout(args: argparse.Namespace) -> int:
 
 
 def cmd_experiment(args: argparse.Namespace) -> int:
-    from glocal_app.launch import experiment
+    from glocal_app.experiment import experiment
 
     return experiment(args.strategies, args.seeds, args.preset, args.out, namespace=args.namespace,
                       use_sim_time=args.use_sim_time, step_budget=args.budget, learner_profile=args.profile,

@@ -1,4 +1,4 @@
-"""``glocal-ros launch`` and ``glocal-ros experiment``: the whole graph as processes, on your ROS domain or a free one.
+"""``glocal-ros launch``: the whole graph as processes, on your ROS domain or a free one.
 
 ``launch`` starts recorder, sim and learner, waits until the recorder
 listens to the episode stream, then starts the curriculum and shows its
@@ -44,11 +44,7 @@ says what it last heard, what the curriculum was waiting for and whether
 the learner still answers, stops the graph as Ctrl-C does, and exits with
 ``EXIT_STALLED``; the same command resumes the run.
 
-``experiment`` runs strategies x seeds as separate launches into
-``OUT/<strategy>-seed<N>/``, skips runs already finished, resumes the others,
-then writes one report over all of them. The launches run here one after
-another, or, with a Ray address, as Ray tasks on a cluster
-(``glocal_app.ray_runs``); either way each is ``RunOptions.launch_run``.
+``glocal-ros experiment`` is many launches: ``glocal_app.experiment``.
 """
 
 from __future__ import annotations
@@ -57,9 +53,8 @@ import json
 import signal
 import sys
 import time
-from dataclasses import dataclass
 from pathlib import Path
-from typing import Callable, Iterator, Sequence
+from typing import Sequence
 
 import rclpy
 from glocal_interfaces.msg import CurriculumState, EpisodeRecord, TrainingProgress
@@ -67,14 +62,14 @@ from glocal_interfaces.srv import ListPolicies
 from rclpy.node import Node
 from rclpy.signals import SignalHandlerOptions
 
-from glocal_app.arguments import EXIT_FAILED, EXIT_INTERRUPTED, EXIT_STALLED
-from glocal_app.processes import (FoxgloveEndpoint, NodeProcess, check_foxglove_endpoint, check_pairs, check_run_dir,
+from glocal_app.exit_codes import EXIT_FAILED, EXIT_INTERRUPTED, EXIT_STALLED
+from glocal_app.processes import (FoxgloveEndpoint, NodeProcess, check_episode_steps, check_foxglove_endpoint,
+                                   check_learner_profile, check_pairs, check_step_budget,
                                    check_writable_directory, claim_run_dir, isolated_environment, namespace_arguments, new_bag_path,
                                    node_namespace, node_path, normalize_namespace, pair_namespaces, preset_file,
-                                   preset_parameters, recorded_run_settings, remote_pair_indices, run_nodes,
+                                   recorded_run_settings, remote_pair_indices, run_nodes,
                                    run_parameters, run_settings, split_node_path, PAIR_NAMESPACE, PAIR_NODES,
                                    STATE_FILE, TENSORBOARD_DIR)
-from glocal_ros.curriculum.codes import STRATEGY_NAMES
 from glocal_ros.domain import Domain, choose_domain_id, domain_id_from_environment
 from glocal_ros.foxglove_layout import RUN_LAYOUT, write_layout
 from glocal_ros.recording import message_counts
@@ -535,162 +530,3 @@ def write_run_report(run_dirs: Sequence[Path], out_dir: Path) -> None:
         print(f"no report: {error}")
         return
     print(f"report: {path}")
-
-
-def check_episode_steps(preset: str, params_dir: Path | None = None) -> None:
-    """``ValueError`` unless the preset gives the sim's T (``max_steps``) and the curriculum's
-    (``max_episode_steps``, which sizes the baselines' goals) the same value."""
-    from glocal_ros.sim_contract import DEFAULT_EPISODE_STEPS
-
-    sim = preset_parameters(preset, "sim_node", params_dir).get("max_steps", DEFAULT_EPISODE_STEPS)
-    curriculum = preset_parameters(preset, "curriculum_node", params_dir).get("max_episode_steps",
-                                                                              DEFAULT_EPISODE_STEPS)
-    if sim != curriculum:
-        raise ValueError(f"preset {preset}: sim_node max_steps {sim} and curriculum_node max_episode_steps "
-                         f"{curriculum} must be the same T")
-
-
-def check_step_budget(preset: str, step_budget: int | None) -> None:
-    """``ValueError`` when ``step_budget`` (None: the preset's own) ends before any strategy evaluates a trained task.
-
-    GloCAL checks a training task every ``eval_interval`` steps, the baselines evaluate every
-    ``baseline_eval_interval`` steps: a budget below either leaves that strategy nothing to learn by.
-    """
-    if step_budget is None:
-        return
-    parameters = preset_parameters(preset, "curriculum_node")
-    intervals = {name: int(parameters[name]) for name in ("eval_interval", "baseline_eval_interval")
-                 if name in parameters}
-    if step_budget < max(intervals.values(), default=1):
-        shown = ", ".join(f"{name} {value}" for name, value in intervals.items())
-        raise ValueError(f"a budget of {step_budget} training steps is below one evaluation of preset {preset} "
-                         f"({shown}): a strategy would never evaluate what it trained")
-
-
-def check_learner_profile(name: str | None) -> None:
-    """``ValueError`` naming the profiles unless ``name`` is one (None: the preset's)."""
-    if name is not None:
-        from learner_node.profiles import learner_profile
-
-        learner_profile(name)
-
-
-#: A run of an experiment: its strategy, seed and run directory (``experiment_runs``).
-PlannedRun = tuple[str, int, Path]
-
-
-def experiment_runs(strategies: Sequence[str], seeds: Sequence[int], out: Path) -> list[PlannedRun]:
-    """``(strategy, seed, OUT/<strategy>-seed<N>)`` of every run of an experiment, in the order they run."""
-    return [(strategy, seed, out / f"{strategy}-seed{seed}") for strategy in strategies for seed in seeds]
-
-
-def check_experiment(strategies: Sequence[str], seeds: Sequence[int], preset: str, out: Path,
-                     step_budget: int | None = None, namespace: str = "", learner_profile: str | None = None,
-                     pairs: int = 1, use_sim_time: bool = False) -> None:
-    """Everything ``experiment`` refuses, checked before its first node starts; ``ValueError`` says what.
-
-    Strategies must be known and not repeat, seeds non-negative and not repeat, the preset must
-    exist, the budget cover one evaluation, every strategy train on ``pairs`` pairs (``check_pairs``;
-    the machine's cores are the command line's to check), and no run directory may hold a run of other
-    settings (another preset, budget or number of pairs): its runs would be mixed into this experiment's report.
-    """
-    unknown = [s for s in strategies if s not in STRATEGY_NAMES]
-    if unknown or not strategies:
-        raise ValueError(f"unknown strategies {unknown}: expected some of {', '.join(STRATEGY_NAMES)}")
-    if len(set(strategies)) != len(strategies) or len(set(seeds)) != len(seeds) or not seeds:
-        raise ValueError(f"strategies {list(strategies)} and seeds {list(seeds)} must each be given once")
-    if min(seeds) < 0:
-        raise ValueError(f"seeds must be non-negative integers, got {list(seeds)}")
-    preset_file(preset)
-    check_episode_steps(preset)
-    check_step_budget(preset, step_budget)
-    check_learner_profile(learner_profile)
-    normalize_namespace(namespace)
-    for strategy in strategies:
-        check_pairs(pairs, strategy, force=True, use_sim_time=use_sim_time)
-    for strategy, seed, run_dir in experiment_runs(strategies, seeds, out):
-        check_run_dir(run_dir, run_settings(strategy, preset, seed, step_budget, learner_profile, pairs))
-
-
-@dataclass(frozen=True)
-class RunOptions:
-    """What every run of an experiment shares: ``launch``'s arguments beside strategy, seed and run directory.
-
-    ``launch_run`` is the one way an experiment starts a run, here or in a Ray task
-    (``glocal_app.ray_runs``), so that both start the same graph with the same parameters.
-    """
-
-    preset: str
-    namespace: str = ""
-    use_sim_time: bool = False
-    step_budget: int | None = None
-    learner_profile: str | None = None
-    pairs: int = 1
-
-    def launch_run(self, strategy: str, seed: int, run_dir: Path) -> int:
-        """``launch`` one run (or resume it) into ``run_dir``, without its own report; its exit code."""
-        return launch(strategy, self.preset, seed, run_dir, report=False, namespace=self.namespace,
-                      use_sim_time=self.use_sim_time, step_budget=self.step_budget,
-                      learner_profile=self.learner_profile, pairs=self.pairs)
-
-
-def launch_here(runs: Sequence[PlannedRun], options: RunOptions) -> Iterator[tuple[Path, int]]:
-    """Each run launched on this machine, one after another: its run directory and exit code, as it ends."""
-    for strategy, seed, run_dir in runs:
-        yield run_dir, options.launch_run(strategy, seed, run_dir)
-
-
-def experiment(strategies: Sequence[str], seeds: Sequence[int], preset: str, out: Path, namespace: str = "",
-               use_sim_time: bool = False, step_budget: int | None = None, report: bool = True,
-               learner_profile: str | None = None, finished: Callable[[Path], object] | None = None,
-               ray_address: str | None = None, ray_cpus_per_run: int | None = None,
-               prepare: Callable[[], object] | None = None, pairs: int = 1) -> int:
-    """Every strategy x seed as its own run under ``out``; finished runs are kept, others (re)launched.
-
-    The runs go one after another here, each with ``launch``'s namespace, sim time and domain
-    choice, after ``check_experiment`` passed; then one report over all of them (unless ``report`` is off).
-    ``finished(run_dir)`` is called as each launched run finishes; ``prepare()`` once everything
-    was checked, before runs are told finished or not (what must not happen for refused input).
-
-    With ``ray_address`` (``HOST:PORT`` of a Ray cluster, or ``local``) the runs that are not
-    finished are Ray tasks of ``ray_cpus_per_run`` CPUs each instead (``glocal_app.ray_runs``), and
-    come back into ``out`` as they end; the cluster is checked (reachable, a node large enough for
-    one run) before any run starts.
-    """
-    check_experiment(strategies, seeds, preset, out, step_budget, namespace, learner_profile, pairs, use_sim_time)
-    options = RunOptions(preset, namespace, use_sim_time, step_budget, learner_profile, pairs)
-    runs = experiment_runs(strategies, seeds, out)
-    cluster = None
-    if ray_address is not None:
-        from glocal_app.ray_runs import RayCluster
-
-        cluster = RayCluster.connect(ray_address, ray_cpus_per_run)
-    failed = []
-    try:
-        if prepare is not None:
-            prepare()
-        pending = []
-        for run in runs:
-            if run_finished(run[2]):
-                print(f"{run[2].name}: finished before")
-            else:
-                pending.append(run)
-        outcomes = launch_here(pending, options) if cluster is None else cluster.run(pending, options)
-        for run_dir, code in outcomes:
-            if code == EXIT_INTERRUPTED:
-                return code
-            if code:
-                failed.append(run_dir.name)
-            elif finished is not None and run_finished(run_dir):
-                finished(run_dir)
-    except KeyboardInterrupt:  # on Ray: the runs in progress were cancelled (``RayCluster.run``)
-        print("interrupted; the same command resumes the experiment")
-        return EXIT_INTERRUPTED
-    finally:
-        if cluster is not None:
-            cluster.close()
-    if report:
-        write_run_report([run_dir for _, _, run_dir in runs], out / "report")
-    if failed:
-        print(f"failed runs: {', '.join(failed)} (the same command retries them)")
-    return EXIT_FAILED if failed else 0

@@ -5,7 +5,8 @@ from __future__ import annotations
 import argparse
 from pathlib import Path
 
-from glocal_app.arguments import EXIT_FAILED, EXIT_OK, add_profile_argument, count
+from glocal_app.arguments import add_profile_argument, count
+from glocal_app.exit_codes import EXIT_FAILED, EXIT_OK
 from glocal_ros.curriculum.learner import paper_threshold, passes_threshold
 from glocal_ros.paths import assets_dir, object_urdf
 from learner_node.prior import PriorConfig

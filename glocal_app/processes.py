@@ -261,6 +261,44 @@ def preset_parameters(preset: str, node: str, params_dir: Path | None = None) ->
     return dict(document.get(f"/**/{node}", {}).get("ros__parameters", {}))
 
 
+def check_episode_steps(preset: str, params_dir: Path | None = None) -> None:
+    """``ValueError`` unless the preset gives the sim's T (``max_steps``) and the curriculum's
+    (``max_episode_steps``, which sizes the baselines' goals) the same value."""
+    from glocal_ros.sim_contract import DEFAULT_EPISODE_STEPS
+
+    sim = preset_parameters(preset, "sim_node", params_dir).get("max_steps", DEFAULT_EPISODE_STEPS)
+    curriculum = preset_parameters(preset, "curriculum_node", params_dir).get("max_episode_steps",
+                                                                              DEFAULT_EPISODE_STEPS)
+    if sim != curriculum:
+        raise ValueError(f"preset {preset}: sim_node max_steps {sim} and curriculum_node max_episode_steps "
+                         f"{curriculum} must be the same T")
+
+
+def check_step_budget(preset: str, step_budget: int | None) -> None:
+    """``ValueError`` when ``step_budget`` (None: the preset's own) ends before any strategy evaluates a trained task.
+
+    GloCAL checks a training task every ``eval_interval`` steps, the baselines evaluate every
+    ``baseline_eval_interval`` steps: a budget below either leaves that strategy nothing to learn by.
+    """
+    if step_budget is None:
+        return
+    parameters = preset_parameters(preset, "curriculum_node")
+    intervals = {name: int(parameters[name]) for name in ("eval_interval", "baseline_eval_interval")
+                 if name in parameters}
+    if step_budget < max(intervals.values(), default=1):
+        shown = ", ".join(f"{name} {value}" for name, value in intervals.items())
+        raise ValueError(f"a budget of {step_budget} training steps is below one evaluation of preset {preset} "
+                         f"({shown}): a strategy would never evaluate what it trained")
+
+
+def check_learner_profile(name: str | None) -> None:
+    """``ValueError`` naming the profiles unless ``name`` is one (None: the preset's)."""
+    if name is not None:
+        from learner_node.profiles import learner_profile
+
+        learner_profile(name)
+
+
 def check_writable_directory(folder: Path, option: str) -> None:
     """``ValueError`` naming ``option`` unless ``folder`` can be made and written to (it is made)."""
     try:

@@ -56,7 +56,7 @@ from pathlib import Path
 from typing import TYPE_CHECKING, Iterator, Sequence
 
 if TYPE_CHECKING:
-    from glocal_app.launch import PlannedRun, RunOptions
+    from glocal_app.experiment import PlannedRun, RunOptions
 
 #: CPUs a run reserves unless told (``--ray-cpus-per-run``).
 DEFAULT_CPUS_PER_RUN = 2

@@ -63,14 +63,14 @@ def cluster_tasks(scores: Mapping[str, float], k_min: int = 2, k_max: int = 6, s
     if len(tasks) <= 2 or k_top < k_min:
         return Clustering((_cluster(scores),), math.nan)
 
-    best_k, best_silhouette, best_labels = 0, -math.inf, None
+    best_silhouette, best_labels = -math.inf, None
     for k in range(k_min, k_top + 1):
         labels = KMeans(n_clusters=k, n_init=10, random_state=seed).fit_predict(values)
         if len(np.unique(labels)) < 2:
             continue
         silhouette = float(silhouette_score(values, labels))
         if silhouette > best_silhouette:
-            best_k, best_silhouette, best_labels = k, silhouette, labels
+            best_silhouette, best_labels = silhouette, labels
     if best_labels is None:
         return Clustering((_cluster(scores),), math.nan)
 

@@ -28,6 +28,8 @@ UNSEEDED = -1
 #: T: an episode's steps before it is truncated, unless the sim is told otherwise (sim_node ``max_steps``;
 #: curriculum_node's ``max_episode_steps`` must say the same).
 DEFAULT_EPISODE_STEPS = 50
+#: The Gymnasium id of sim_node's ``GraspEnv``, registered when ``sim_node.grasp_env`` is imported.
+GRASP_ENV_ID = "glocal_ros/Grasp-v0"
 #: The sim's envs of evaluation (sim_node ``eval_envs``): eight a worker on two cores, where a step's physics
 #: outweighs its round trip (``glocal-ros bench eval``).
 DEFAULT_EVAL_ENVS = 16

@@ -26,7 +26,6 @@ scores a policy as a Train goal from it starts it, so the two agree.
 
 from __future__ import annotations
 
-import math
 import threading
 import time
 from collections import deque
@@ -42,7 +41,7 @@ from rclpy.action import ActionServer, CancelResponse, GoalResponse
 from rclpy.callback_groups import MutuallyExclusiveCallbackGroup, ReentrantCallbackGroup
 from rclpy.node import Node
 
-from glocal_ros.curriculum.learner import PAPER_EVAL_EPISODES, paper_threshold
+from glocal_ros.curriculum.learner import PAPER_EVAL_EPISODES, TrainGoal
 from glocal_ros.tasks import validate_tasks
 from learner_node.evaluation import evaluate
 from learner_node.policies import PolicyExists, PolicyRegistry
@@ -50,11 +49,12 @@ from learner_node.policy_store import PolicyStore, default_policy_dir
 from learner_node.profiles import DEFAULT_PROFILE, PROFILES, learner_profile
 from learner_node.sac_settings import FINE_TUNING_RECIPES
 from learner_node.sim_client import SimClient
-from learner_node.training import DEFAULT_MAX_STEP_BUDGET, GoalFailed, Trainer, TrainProgress, TrainSpec
+from learner_node.training import DEFAULT_MAX_STEP_BUDGET, GoalFailed, Trainer, TrainProgress, check_goal
 from node_common import names, qos
 from node_common.params import declare
 from node_common.runner import spin_node
 from node_common.services import REFUSED, answers_errors
+from node_common.train_goal import goal_from_message
 
 JOB_POLL_SEC = 0.02
 CLOSE_TIMEOUT_SEC = 10.0
@@ -206,22 +206,10 @@ class LearnerNode(Node):
                 self._goal_taken = False
 
     def _execute_train(self, goal_handle) -> Train.Result:
-        goal: Train.Goal = goal_handle.request
         result = Train.Result()
         try:
-            eval_episodes = goal.eval_episodes or PAPER_EVAL_EPISODES
-            if math.isnan(goal.threshold):
-                raise ValueError("threshold is NaN: give B as a number of successes (negative: 0.75 x eval_episodes)")
-            spec = TrainSpec(
-                task=goal.task, episode_tasks=tuple(goal.episode_tasks), episode_limit=goal.episode_limit,
-                initial_policy=goal.initial_policy,
-                output_policy=goal.output_policy, step_budget=goal.step_budget,
-                threshold=goal.threshold if goal.threshold >= 0 else paper_threshold(eval_episodes),
-                eval_episodes=eval_episodes,
-                eval_interval=goal.eval_interval, stop_when_learned=goal.stop_when_learned,
-                keep_replay_buffer=goal.keep_replay_buffer, seed=None if goal.seed < 0 else goal.seed,
-            )
-            spec.check(self.max_eval_episodes, self.max_step_budget)
+            spec = goal_from_message(goal_handle.request)
+            check_goal(spec, self.max_eval_episodes, self.max_step_budget)
             self.trainer.check_initial_policy(spec.initial_policy)  # unknown, or of another profile: here
             self.policies.check_writable(spec.output_policy)
         except (ValueError, KeyError) as error:
@@ -247,7 +235,7 @@ class LearnerNode(Node):
                 self.run_jobs()  # whatever arrived after the last step
         except Exception as error:  # noqa: BLE001 - the client gets the reason; the node keeps serving
             if not self.context.ok():  # no client can hear of it; the trainer saved its last whole step
-                self.get_logger().info(f"{goal.output_policy}: stopped by the shutdown ({error})")
+                self.get_logger().info(f"{spec.output_policy}: stopped by the shutdown ({error})")
                 return result
             if isinstance(error, GoalFailed):
                 result.steps_used, result.message = error.steps_used, f"training failed: {error}"
@@ -288,7 +276,7 @@ class LearnerNode(Node):
             return "the learner is shutting down"
         return ""
 
-    def _publish_progress(self, goal_handle, spec: TrainSpec, progress: TrainProgress) -> None:
+    def _publish_progress(self, goal_handle, spec: TrainGoal, progress: TrainProgress) -> None:
         # float32 fields take Python floats only: with rclpy's field checks off (Jazzy's default) an
         # int reaches the C conversion unchecked and is read as 0.0 (the "every score is 0" bug).
         latest_score, recent_success_rate = float(progress.latest_score), float(progress.recent_success_rate)
@@ -303,6 +291,9 @@ class LearnerNode(Node):
             env_steps_per_second=float(progress.steps_per_second),
             mean_episode_return=float(progress.mean_episode_return), actor_loss=float(progress.actor_loss),
             critic_loss=float(progress.critic_loss), entropy_coefficient=float(progress.entropy_coefficient),
+            q_parent_action=progress.instruments.q_parent_action,
+            q_current_action=progress.instruments.q_current_action,
+            action_distance=progress.instruments.action_distance, policy_entropy=progress.instruments.policy_entropy,
         )
         message.header.stamp = self.get_clock().now().to_msg()
         self.progress_pub.publish(message)

@@ -12,12 +12,16 @@ stable-baselines3's, so that curves sit beside SB3's and rl-baselines3-zoo's:
   ``train/critic_loss``, ``train/ent_coef`` (the last gradient step's),
   ``time/fps`` (env steps/s of the goal);
 - at every evaluation of the goal: ``eval/successes`` (the paper's score)
-  and ``eval/success_rate``.
+  and ``eval/success_rate``, and the goal's instruments
+  (``learner_node.instruments``): ``instruments/q_parent_action``,
+  ``instruments/q_current_action``, ``instruments/action_distance``,
+  ``instruments/policy_entropy``.
 
 The numbers are those the learner publishes, as float32, the type of the
 messages' fields: a report's are those of its ``glocal/training_progress``
-message, an evaluation's those of its ``glocal/evaluations`` message, so the
-bag and TensorBoard hold the same curves. A value the learner does not have
+message, an evaluation's those of its ``glocal/evaluations`` message (its
+instruments: those of the ``glocal/training_progress`` message sent right
+after it), so the bag and TensorBoard hold the same curves. A value the learner does not have
 yet (a loss before the first gradient step, a return before the first
 episode) is NaN in the message and left out here (an empty CSV cell).
 
@@ -42,8 +46,9 @@ RECENT_EPISODES = 50
 #: The tags of a progress report, in CSV column order.
 PROGRESS_TAGS = ("rollout/success_rate", "rollout/ep_rew_mean", "train/actor_loss", "train/critic_loss",
                  "train/ent_coef", "time/fps")
-#: The tags of an evaluation.
-EVALUATION_TAGS = ("eval/successes", "eval/success_rate")
+#: The tags of an evaluation: its score, and the goal's instruments (``learner_node.instruments``).
+EVALUATION_TAGS = ("eval/successes", "eval/success_rate", "instruments/q_parent_action",
+                   "instruments/q_current_action", "instruments/action_distance", "instruments/policy_entropy")
 CSV_FILE = "progress.csv"
 CSV_COLUMNS = ("goal_steps", "wall_time", *PROGRESS_TAGS, *EVALUATION_TAGS)
 

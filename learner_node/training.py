@@ -51,6 +51,10 @@ Choices:
   SB3 loop before it is refused, naming what differs, and never resumed.
 - With a ``tensorboard_dir``, every progress report and evaluation of a goal
   is also written to its TensorBoard and CSV curves (``learner_node.scalars``).
+- Every evaluation of a goal also measures its instruments on probe states
+  (``learner_node.instruments``: the critics' value of the parent's and the
+  current actions, their distance, the policy's entropy); progress reports
+  carry the latest.
 """
 
 from __future__ import annotations
@@ -66,13 +70,14 @@ from pathlib import Path
 from typing import Callable, Sequence
 
 import numpy as np
-from glocal_ros.curriculum.learner import PAPER_EVAL_EPISODES, EpisodeSummary, paper_threshold, passes_threshold
+from glocal_ros.curriculum.learner import EpisodeSummary, TrainGoal, passes_threshold
 from glocal_ros.files import atomic_write
 from glocal_ros.seeds import MAX_SEED, derived_seed
 from glocal_ros.sim_contract import BatchStepper
 from glocal_ros.tasks import validate_tasks
 from learner_node.evaluation import BatchPolicy, Score, evaluate
 from learner_node.fine_tuning import goal_start_actor, start_fine_tuning
+from learner_node.instruments import GoalInstruments, Instruments
 from learner_node.model_files import load_model, write_model
 from learner_node.policies import RANDOM_POLICY, PolicyRegistry, deterministic_actions
 from learner_node.policy_store import PolicyRecord, check_name
@@ -98,47 +103,31 @@ TRAINING_STREAM, EVALUATION_STREAM = 0, 1
 FINISHED_FILE = "finished.json"
 
 
-@dataclass(frozen=True)
-class TrainSpec:
-    """What a Train goal asks for (see glocal_interfaces/action/Train.action)."""
-
-    task: str
-    initial_policy: str
-    output_policy: str
-    step_budget: int
-    episode_tasks: tuple[str, ...] = ()
-    episode_limit: int = 0  # end the goal once this many training episodes have finished; 0: no limit
-    threshold: float = paper_threshold()
-    eval_episodes: int = PAPER_EVAL_EPISODES
-    eval_interval: int = 0
-    stop_when_learned: bool = False
-    keep_replay_buffer: bool = False
-    seed: int | None = None  # None: the trainer's own streams (see ``Trainer._seeded``)
-
-    def check(self, max_eval_episodes: int = 1_000_000, max_step_budget: int = DEFAULT_MAX_STEP_BUDGET) -> None:
-        """Raise ``ValueError`` with a message a user can act on."""
-        if not self.task and not self.episode_tasks:
-            raise ValueError("a goal needs a task or episode_tasks")
-        validate_tasks([self.task] if self.task else [])
-        validate_tasks(list(self.episode_tasks))
-        check_name(self.initial_policy)
-        check_name(self.output_policy)
-        if self.initial_policy == RANDOM_POLICY:
-            raise ValueError(f"{RANDOM_POLICY!r} has no model to train from: start from a stored policy")
-        if self.output_policy == RANDOM_POLICY:
-            raise ValueError(f"{RANDOM_POLICY!r} is built in and cannot be written")
-        if not 1 <= self.step_budget <= max_step_budget:
-            raise ValueError(f"step_budget {self.step_budget} outside 1..{max_step_budget}")
-        if not 0 <= self.threshold < self.eval_episodes:
-            raise ValueError(f"threshold {self.threshold} must lie in [0, eval_episodes={self.eval_episodes})")
-        if not 1 <= self.eval_episodes <= max_eval_episodes:
-            raise ValueError(f"eval_episodes {self.eval_episodes} outside 1..{max_eval_episodes}")
-        if self.episode_limit < 0:
-            raise ValueError(f"episode_limit must not be negative, got {self.episode_limit}")
-        if self.eval_interval < 0:
-            raise ValueError(f"eval_interval must not be negative, got {self.eval_interval}")
-        if self.seed is not None and not 0 <= self.seed <= MAX_SEED:
-            raise ValueError(f"seed {self.seed} outside 0..{MAX_SEED} (-1 for none)")
+def check_goal(goal: TrainGoal, max_eval_episodes: int = 1_000_000,
+               max_step_budget: int = DEFAULT_MAX_STEP_BUDGET) -> None:
+    """Raise ``ValueError`` with a message a user can act on, unless this learner can run ``goal``."""
+    if not goal.task and not goal.episode_tasks:
+        raise ValueError("a goal needs a task or episode_tasks")
+    validate_tasks([goal.task] if goal.task else [])
+    validate_tasks(list(goal.episode_tasks))
+    check_name(goal.initial_policy)
+    check_name(goal.output_policy)
+    if goal.initial_policy == RANDOM_POLICY:
+        raise ValueError(f"{RANDOM_POLICY!r} has no model to train from: start from a stored policy")
+    if goal.output_policy == RANDOM_POLICY:
+        raise ValueError(f"{RANDOM_POLICY!r} is built in and cannot be written")
+    if not 1 <= goal.step_budget <= max_step_budget:
+        raise ValueError(f"step_budget {goal.step_budget} outside 1..{max_step_budget}")
+    if not 0 <= goal.threshold < goal.eval_episodes:
+        raise ValueError(f"threshold {goal.threshold} must lie in [0, eval_episodes={goal.eval_episodes})")
+    if not 1 <= goal.eval_episodes <= max_eval_episodes:
+        raise ValueError(f"eval_episodes {goal.eval_episodes} outside 1..{max_eval_episodes}")
+    if goal.episode_limit < 0:
+        raise ValueError(f"episode_limit must not be negative, got {goal.episode_limit}")
+    if goal.eval_interval < 0:
+        raise ValueError(f"eval_interval must not be negative, got {goal.eval_interval}")
+    if goal.seed is not None and not 0 <= goal.seed <= MAX_SEED:
+        raise ValueError(f"seed {goal.seed} outside 0..{MAX_SEED} (-1 for none)")
 
 
 class GoalFailed(RuntimeError):
@@ -163,6 +152,7 @@ class TrainProgress:
     actor_loss: float = math.nan  # the last gradient step's (NaN before the first)
     critic_loss: float = math.nan
     entropy_coefficient: float = math.nan
+    instruments: Instruments = Instruments()  # of the goal's last evaluation (``learner_node.instruments``)
 
     def scalars(self) -> dict[str, float]:
         """The report as ``learner_node.scalars`` tags it."""
@@ -224,7 +214,7 @@ class Trainer:
 
     def train(
         self,
-        spec: TrainSpec,
+        spec: TrainGoal,
         on_progress: Callable[[TrainProgress], None] = lambda progress: None,
         should_stop: Callable[[], str] = lambda: "",
         between_steps: Callable[[], bool] = lambda: False,
@@ -262,7 +252,7 @@ class Trainer:
             return self.policies.load(name, seed)
         return deterministic_actions(goal_start_actor(self.policies.model(name), self.fine_tuning, tasks))
 
-    def _mark_finished(self, folder: Path, spec: TrainSpec, state: _GoalState, model_file: str) -> None:
+    def _mark_finished(self, folder: Path, spec: TrainGoal, state: _GoalState, model_file: str) -> None:
         """Replace the checkpoint by the goal's outcome: a client that lost the result may ask again."""
         shutil.rmtree(folder, ignore_errors=True)
         folder.mkdir(parents=True)
@@ -270,7 +260,7 @@ class Trainer:
                            "model_file": model_file}).encode()
         atomic_write(folder / FINISHED_FILE, lambda stream: stream.write(text))
 
-    def _finished_before(self, spec: TrainSpec, folder: Path) -> TrainOutcome | None:
+    def _finished_before(self, spec: TrainGoal, folder: Path) -> TrainOutcome | None:
         """The outcome of this very goal when it finished before and its policy is unchanged since."""
         finished = _read_json(folder / FINISHED_FILE, ("spec", "state", "model_file"))
         if finished is None:
@@ -284,7 +274,7 @@ class Trainer:
         state = _GoalState(**finished["state"])
         return _outcome(state, True, f"finished before, not trained again: {state.steps_used} steps")
 
-    def _store(self, spec: TrainSpec, model, ring: TransitionRing, state: _GoalState) -> PolicyRecord:
+    def _store(self, spec: TrainGoal, model, ring: TransitionRing, state: _GoalState) -> PolicyRecord:
         parent = self.policies.record(spec.initial_policy)
         record = PolicyRecord(
             name=spec.output_policy, task=spec.task or ",".join(sorted(set(spec.episode_tasks))),
@@ -299,7 +289,7 @@ class Trainer:
                       ring)
         return stored
 
-    def _warm_model(self, spec: TrainSpec) -> tuple[object, TransitionRing] | None:
+    def _warm_model(self, spec: TrainGoal) -> tuple[object, TransitionRing] | None:
         """The previous goal's model and buffer when ``spec`` continues it (``keep_replay_buffer``), else None."""
         store_path = str(self.policies.model_path(spec.initial_policy))
         if spec.keep_replay_buffer and self._warm and self._warm[:2] == (spec.initial_policy, store_path):
@@ -329,7 +319,7 @@ class _Goal:
     policy stored, the outcome kept for a client that asks again.
     """
 
-    def __init__(self, trainer: Trainer, spec: TrainSpec, on_progress: Callable[[TrainProgress], None],
+    def __init__(self, trainer: Trainer, spec: TrainGoal, on_progress: Callable[[TrainProgress], None],
                  should_stop: Callable[[], str], between_steps: Callable[[], bool],
                  on_evaluation: Callable[[Score, int], None]):
         self.trainer, self.spec, self.tuning = trainer, spec, trainer.fine_tuning
@@ -344,6 +334,8 @@ class _Goal:
                                    between_steps=self.between_steps,
                                    time_limit_terminal=trainer.profile.time_limit_terminal)
         self.model, self.ring, self.resumed = self.model_to_train()
+        self.instruments = GoalInstruments(initial, trainer.policies.experience(spec.initial_policy))
+        self.latest_instruments = Instruments()
         self.seed_streams()
         self.tune()
         self.updates = OverlappedUpdates(self.model, self.ring, inclusive_start=self.tuning.random_steps is not None)
@@ -591,7 +583,7 @@ class _Goal:
             self.state.score["successes"] if self.state.score else -1.0,
             (steps - self.resumed) / max(now - self.started, 1e-9),
             float(np.mean(self.recent_returns)) if self.recent_returns else math.nan,
-            info.actor_loss, info.critic_loss, info.entropy_coefficient)
+            info.actor_loss, info.critic_loss, info.entropy_coefficient, self.latest_instruments)
         self.on_progress(progress)
         if self.scalars is not None:
             self.scalars.write(steps, progress.scalars())
@@ -617,10 +609,13 @@ class _Goal:
         state.score = asdict(score)
         state.learned = passes_threshold(score.successes, spec.threshold)
         state.steps_at_last_eval = steps
+        self.latest_instruments = self.instruments.measure(self.model, self.ring)
         self.on_evaluation(score, steps)
         if self.scalars is not None:
             self.scalars.write(steps, {"eval/successes": score.successes,
-                                       "eval/success_rate": score.successes / score.episodes})
+                                       "eval/success_rate": score.successes / score.episodes,
+                                       **self.latest_instruments.scalars()})
+        self.report_progress(steps, time.monotonic())  # every evaluation's instruments reach the owner
 
     def save_checkpoint(self) -> None:
         """Model and buffer under new names, then the json naming them: a kill leaves the last whole one."""
@@ -708,6 +703,6 @@ def _read_json(path: Path, keys: Sequence[str]) -> dict | None:
     return saved
 
 
-def _spec_key(spec: TrainSpec) -> dict:
+def _spec_key(spec: TrainGoal) -> dict:
     """The goal as its checkpoint stores it: the same goal sent again resumes it."""
     return json.loads(json.dumps(asdict(spec)))

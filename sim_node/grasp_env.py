@@ -66,7 +66,7 @@ from gymnasium import spaces
 from pybullet_utils.bullet_client import BulletClient
 
 from glocal_ros.paths import object_urdf
-from glocal_ros.sim_contract import DEFAULT_EPISODE_STEPS
+from glocal_ros.sim_contract import DEFAULT_EPISODE_STEPS, GRASP_ENV_ID
 from glocal_ros.spaces import ACTION_DIM, OBS_DIM, PHYSICS_TIMESTEP, SUBSTEPS
 from glocal_ros.tasks import NUM_TASKS, PRIOR_TASK, task_index
 from sim_node.grasp_world import OBJECT_SPOT, TABLE_TOP_Z, GraspWorld
@@ -355,3 +355,7 @@ class GraspEnv(gym.Env[np.ndarray, np.ndarray]):
         observation[OBS_FINGER_CONTACTS] = (left, right)
         observation = np.clip(observation, self.observation_space.low, self.observation_space.high)
         return observation.astype(np.float32)
+
+
+if GRASP_ENV_ID not in gym.registry:
+    gym.register(id=GRASP_ENV_ID, entry_point=GraspEnv)

@@ -8,6 +8,7 @@ runs never see each other.
 from __future__ import annotations
 
 import os
+import socket
 import sys
 import tempfile
 import time
@@ -22,13 +23,15 @@ from glocal_ros.domain import reserve_domain_id
 from node_common.runner import configure_discovery
 
 REPO = Path(__file__).resolve().parent.parent
+#: The smoke preset's parameter file: the nodes' parameters of the suite's runs.
+SMOKE = REPO / "assets" / "params" / "smoke.yaml"
 
 
 def smoke_tasks() -> list[str]:
     """The tasks of the smoke preset, sorted, as its file names them."""
     import yaml
 
-    params = yaml.safe_load((REPO / "assets" / "params" / "smoke.yaml").read_text())
+    params = yaml.safe_load(SMOKE.read_text())
     return sorted(params["/**/curriculum_node"]["ros__parameters"]["tasks"].split(","))
 
 _DOMAIN_ID, _DOMAIN_LOCK = reserve_domain_id()
@@ -101,6 +104,25 @@ def wait_until(predicate, timeout: float, what: str, poll: float = 0.05, process
         time.sleep(poll)
     logs = "\n".join(f"--- {p.node} ---\n{p.log()}" for p in processes)
     pytest.fail(f"timed out after {timeout} s waiting for {what}\n{logs}")
+
+
+def free_port() -> int:
+    """A loopback port nothing listens on (bound, then let go)."""
+    with socket.socket() as probe:
+        probe.bind(("127.0.0.1", 0))
+        return probe.getsockname()[1]
+
+
+def journal_lines(state_dir: Path) -> list[str]:
+    """The lines of a curriculum node's journal in ``state_dir`` (none before it is written)."""
+    path = state_dir / "journal.jsonl"
+    return path.read_text().splitlines() if path.is_file() else []
+
+
+def wait_for_clean_exit(node: NodeProcess, timeout: float, processes=()) -> None:
+    """Wait for ``node`` (a curriculum run) to end, failing on ``processes`` ending first; it must exit 0."""
+    wait_until(lambda: node.process.poll() is not None, timeout, "the end of the run", processes=processes)
+    assert node.process.returncode == 0, node.log()
 
 
 def answers(client, request, timeout: float = 5.0) -> bool:

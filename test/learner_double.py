@@ -16,7 +16,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from glocal_ros.curriculum.learner import EpisodeSummary, TrainRequest, TrainResult
+from glocal_ros.curriculum.learner import EpisodeSummary, TrainGoal, TrainResult
 from glocal_ros.tasks import ALL_TASKS, grid_coordinates, task_index
 
 
@@ -46,7 +46,7 @@ class SimulatedLearner:
         rng = self._rng if seed is None else np.random.default_rng(seed)
         return {t: float(rng.binomial(episodes, competence[task_index(t)])) for t in tasks}
 
-    def train(self, request: TrainRequest) -> TrainResult:
+    def train(self, request: TrainGoal) -> TrainResult:
         self.calls.append(("train", request))
         rng = self._rng if request.seed is None else np.random.default_rng(request.seed)
         if request.step_budget < 1:

@@ -50,14 +50,22 @@ def test_bench_learner_without_learner_node_shows_a_dash():
         ["paper", "2", "80.0", "72.0 (2)", "-", "144.0", "0.90", "-", "0.50"]  # the graph is via sim_node here
 
 
+def test_a_curves_write_is_timed(tmp_path):
+    from glocal_app.benches.learner import seconds_per_curves_write
+
+    assert 0 < seconds_per_curves_write(tmp_path / "curves", writes=20) < 1
+    assert (tmp_path / "curves" / "progress.csv").read_text().count("\n") == 21  # the header and each write
+
+
 def test_bench_learner_reports_what_the_curves_cost():
     row = LearnerBenchRow("glocal_ros", 4, 300.0, 280.0, None, 2, ((300.0, 310.0), (280.0, 281.0), (800.0, 790.0),
-                                                                   (291.0, 304.0)), env_floor=795.0, with_curves=297.5)
+                                                                   (291.0, 304.0)), env_floor=795.0, with_curves=297.5,
+                          curves_write=0.0002)
     assert row.variant_names == ("in-process", "via sim_node", "env floor", "in-process with curves")
     report = learner_bench_report([row], "glocal-ros bench learner --curves", steps=10, rounds=2)
     (line,) = [line for line in report.splitlines() if line.startswith("| glocal_ros | 4 | 300.0 | 297.5")]
     assert [cell.strip() for cell in line.strip("|").split("|")] == \
-        ["glocal_ros", "4", "300.0", "297.5", "0.992", "0.970, 0.981", "0.11", "0.011%"]  # 4/297.5 - 4/300 s
+        ["glocal_ros", "4", "300.0", "297.5", "0.992", "0.970, 0.981", "0.11", "0.200", "0.0200%"]  # 4/297.5 - 4/300 s
     assert "in-process with curves 291.0, 304.0" in report
 
 

@@ -10,7 +10,7 @@ from glocal_ros.curriculum.journal import JournaledLearner, JournalMismatch
 from glocal_ros.curriculum.codes import (
     ROLE_CLUSTER, ROLE_GLOBAL, ROLE_SAMPLED, STATUS_EVALUATING, STATUS_FINISHED,
 )
-from glocal_ros.curriculum.learner import TrainRequest
+from glocal_ros.curriculum.learner import TrainGoal
 from glocal_ros.curriculum.run import Run, RunConfig
 from glocal_ros.curriculum.strategies import STRATEGIES, run_strategy
 from glocal_ros.tasks import ALL_TASKS
@@ -401,7 +401,7 @@ def test_the_double_refuses_what_the_learner_refuses():
     with pytest.raises(KeyError):
         learner.evaluate("nope", ["A0"], 10)
     with pytest.raises(ValueError):
-        learner.train(TrainRequest("A0", "prior", "x", 0, 75, 100))
+        learner.train(TrainGoal("A0", "prior", "x", 0, 75, 100))
 
 
 def test_every_named_strategy_exists():

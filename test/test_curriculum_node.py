@@ -10,11 +10,10 @@ import json
 import pytest
 from glocal_interfaces.msg import CurriculumState, TaskAssignment
 
-from conftest import REPO, smoke_tasks, wait_until
+from conftest import REPO, SMOKE, smoke_tasks, wait_until
 from glocal_app.processes import NodeProcess
 from node_common import names, qos
 
-SMOKE = REPO / "assets" / "params" / "smoke.yaml"
 STRATEGIES = ["glocal", "random", "alp_gmm_250", "alp_gmm_10", "glocal_no_global", "glocal_random_cluster"]
 
 

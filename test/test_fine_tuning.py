@@ -13,7 +13,8 @@ from learner_node.fine_tuning import input_layers, start_fine_tuning
 from learner_node.policies import PolicyRegistry
 from learner_node.policy_store import PolicyStore
 from learner_node.sac_settings import COMPUTE_THREADS, XLA_ONE_THREAD_FLAGS, FineTuning, fine_tuning_recipe
-from learner_node.training import Trainer, TrainSpec
+from glocal_ros.curriculum.learner import TrainGoal
+from learner_node.training import Trainer
 from sim_node.batch import BatchedEnvs
 from sim_node.grasp_env import GraspEnv
 
@@ -85,7 +86,7 @@ def test_a_goal_with_task_inputs_trains_the_new_bit_from_the_known_one(tmp_path)
     b1 = task_index("B1")
     try:
         outcome = Trainer(envs, policies, tmp_path / "checkpoints",
-                          fine_tuning=fine_tuning_recipe("parent-experience-task-inputs")).train(TrainSpec(
+                          fine_tuning=fine_tuning_recipe("parent-experience-task-inputs")).train(TrainGoal(
                               "B1", "prior", "b1", step_budget=10, threshold=0, eval_episodes=1))
     finally:
         envs.close()

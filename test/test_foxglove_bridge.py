@@ -18,7 +18,7 @@ import pytest
 from websockets.exceptions import InvalidStatus
 from websockets.sync.client import ClientConnection, connect
 
-from conftest import node_starter, spun_test_node, wait_until
+from conftest import free_port, node_starter, spun_test_node, wait_until
 from foxglove_bridge_node.bridge import TopicSelection, package_asset
 from glocal_ros.recording import BagWriter, graph_typestore, message_definition
 from glocal_ros.topics import CURRICULUM_STATE, TF
@@ -28,12 +28,6 @@ MESSAGE_DATA = 0x01  # the protocol's binary opcode of a message from a subscrib
 STATUS_ERROR = 2
 WAIT_SEC = 60.0
 UNKNOWN_TYPE_TOPIC = "/glocal/feedback_of_unknown_type"  # generous: the machine is shared
-
-
-def free_port() -> int:
-    with socket.socket() as probe:
-        probe.bind(("127.0.0.1", 0))
-        return probe.getsockname()[1]
 
 
 class FoxgloveClient:

@@ -214,7 +214,7 @@ def test_launch_refuses_a_bad_domain_id_or_namespace_before_anything_starts(tmp_
 
 
 def test_the_presets_give_the_sim_and_the_curriculum_one_episode_length(tmp_path):
-    from glocal_app.launch import check_episode_steps
+    from glocal_app.processes import check_episode_steps
     from glocal_app.processes import preset_file
 
     for preset in ("smoke", "demo", "bench", "paper"):
@@ -226,17 +226,18 @@ def test_the_presets_give_the_sim_and_the_curriculum_one_episode_length(tmp_path
 
 
 def test_namespace_sim_time_and_profile_reach_launch_and_experiment(monkeypatch, tmp_path):
+    import glocal_app.experiment
     import glocal_app.launch
     from glocal_app.cli import main
 
     calls = []
     monkeypatch.setattr(glocal_app.launch, "launch", lambda *args, **kwargs: calls.append((args, kwargs)) or 0)
-    monkeypatch.setattr(glocal_app.launch, "experiment", lambda *args, **kwargs: calls.append((args, kwargs)) or 0)
+    monkeypatch.setattr(glocal_app.experiment, "experiment", lambda *args, **kwargs: calls.append((args, kwargs)) or 0)
     assert main(["launch", "--preset", "smoke", "--out", str(tmp_path), "--namespace", "robot1",
                  "--use-sim-time", "--profile", "paper"]) == 0
     assert main(["experiment", "--strategies", "random", "--seeds", "0", "--out", str(tmp_path)]) == 0
     assert calls[0][1] == {"namespace": "robot1", "use_sim_time": True, "learner_profile": "paper", "foxglove": None,
-                           "pairs": 1, "remote_pairs": 0}
+                           "pairs": 1, "remote_pairs": 0, "tensorboard_dir": None}
     assert calls[1][1] == {"namespace": "", "use_sim_time": False, "step_budget": None, "learner_profile": None,
                            "ray_address": None, "ray_cpus_per_run": 2, "pairs": 1}
     assert main(["experiment", "--strategies", "random", "--seeds", "0", "--out", str(tmp_path), "--ray",

@@ -12,10 +12,10 @@ import sys
 import gymnasium
 import pytest
 
-import glocal_ros
 from conftest import REPO
 from glocal_ros.objects import MIN_BEST_POSE_SUCCESS, ObjectSetMetadata, never_grasped
 from glocal_ros.paths import objects_dir
+from glocal_ros.sim_contract import GRASP_ENV_ID
 from glocal_ros.spaces import ACTION_DIM, OBS_DIM
 from glocal_ros.tasks import ALL_TASKS
 from sim_node.lifting_poses import lifting_pose_share
@@ -24,8 +24,8 @@ from sim_node.scripted_grasp import scripted_success_rate
 METADATA = ObjectSetMetadata.load(objects_dir())
 
 
-def test_gymnasium_make_after_importing_the_package():
-    env = gymnasium.make(glocal_ros.GRASP_ENV_ID, task="C3")
+def test_gymnasium_makes_the_env_by_its_module_and_id():
+    env = gymnasium.make(f"sim_node.grasp_env:{GRASP_ENV_ID}", task="C3")
     try:
         observation, info = env.reset(seed=0)
         assert observation.shape == (OBS_DIM,) and env.action_space.shape == (ACTION_DIM,)
@@ -36,7 +36,7 @@ def test_gymnasium_make_after_importing_the_package():
 
 @pytest.fixture(scope="module")
 def env():
-    env = gymnasium.make(glocal_ros.GRASP_ENV_ID, task="A0")
+    env = gymnasium.make(f"sim_node.grasp_env:{GRASP_ENV_ID}", task="A0")
     yield env
     env.close()
 

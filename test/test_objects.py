@@ -14,6 +14,7 @@ import pybullet as p
 import pytest
 import trimesh
 
+from conftest import REPO
 from glocal_ros.objects import (
     GRIPPER_FIT_FRACTION,
     GRIPPER_WIDTH,
@@ -41,7 +42,6 @@ from glocal_ros.objects.pipeline import candidate_mesh, candidate_params
 from glocal_ros.objects.raycast import first_hits
 from glocal_ros.tasks import ALL_TASKS, grid_coordinates
 
-REPO = Path(__file__).resolve().parents[1]
 ASSETS = REPO / "assets" / "objects"
 # Small enough that a whole pool takes seconds; only tests use it. V-HACD at a tenth of its voxels: the
 # decomposition runs for every object written, and its quality is the committed set's to check.

@@ -29,11 +29,10 @@ import signal
 import pytest
 from glocal_interfaces.msg import TrainingProgress
 
-from conftest import REPO, wait_until
+from conftest import REPO, SMOKE, journal_lines, wait_for_clean_exit, wait_until
 from glocal_app.processes import NodeProcess, namespace_arguments
 from node_common import names, qos
 
-SMOKE = REPO / "assets" / "params" / "smoke.yaml"
 PAIRS = ("/pair0", "/pair1")
 CHECKPOINT_INTERVAL = 40
 #: The smoke preset's tasks and T, with goals long enough to be killed in and a budget for about four of them.
@@ -102,8 +101,7 @@ def curriculum(folder, **params) -> NodeProcess:
 
 
 def journal(folder) -> list[dict]:
-    path = folder / "state" / "journal.jsonl"
-    return [json.loads(line) for line in path.read_text().splitlines()[1:]] if path.is_file() else []
+    return [json.loads(line) for line in journal_lines(folder / "state")[1:]]
 
 
 def answered_policies(folder) -> set[str]:
@@ -111,9 +109,7 @@ def answered_policies(folder) -> set[str]:
 
 
 def finish(node: NodeProcess, pairs: Pairs) -> None:
-    wait_until(lambda: node.process.poll() is not None, RUN_SEC, "the end of the run",
-               processes=pairs.processes())
-    assert node.process.returncode == 0, node.log()
+    wait_for_clean_exit(node, RUN_SEC, pairs.processes())
 
 
 def final_state(folder) -> dict:

@@ -28,7 +28,8 @@ from learner_node.model_files import load_model, load_pickled_model
 from learner_node.policies import PolicyRegistry
 from learner_node.policy_store import PolicyStore
 from learner_node.prior import PriorConfig, train_prior
-from learner_node.training import CHECKPOINT_FILE, FINISHED_FILE, Trainer, TrainSpec
+from glocal_ros.curriculum.learner import TrainGoal
+from learner_node.training import CHECKPOINT_FILE, FINISHED_FILE, Trainer
 from sim_node.batch import BatchedEnvs
 from sim_node.grasp_env import GraspEnv, GraspEnvConfig
 from sim_node.scripted_grasp import ScriptedGraspPolicy
@@ -122,7 +123,7 @@ def goal(tmp_path_factory):
     work = tmp_path_factory.mktemp("goal")
     envs = BatchedEnvs(lambda i: GraspEnv("A0", config=SHORT), 2, "A0")
     policies = PolicyRegistry(PolicyStore(work / "store"), [PolicyStore(assets_dir() / "priors")])
-    spec = TrainSpec("A0", "prior", "out", step_budget=40, eval_episodes=1)
+    spec = TrainGoal("A0", "prior", "out", step_budget=40, eval_episodes=1)
     vector_steps = iter(range(1_000))
     trainer = Trainer(envs, policies, work / "checkpoints")
     stopped = trainer.train(spec, should_stop=lambda: "stopped" if next(vector_steps) >= 8 else "")

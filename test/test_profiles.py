@@ -17,7 +17,8 @@ from learner_node.policies import PolicyRegistry
 from learner_node.policy_store import PolicyRecord, PolicyStore
 from learner_node.profiles import PROFILES, learner_profile
 from learner_node.sac_settings import DEFAULT_FINE_TUNING, FineTuning
-from learner_node.training import CHECKPOINT_FILE, EVALUATION_STREAM, Trainer, TrainSpec
+from glocal_ros.curriculum.learner import TrainGoal
+from learner_node.training import CHECKPOINT_FILE, EVALUATION_STREAM, Trainer
 from learner_node.vec_env import BatchVecEnv, TaskCycle
 from sim_node.batch import BatchedEnvs
 from sim_node.grasp_env import GraspEnv, GraspEnvConfig
@@ -132,8 +133,8 @@ def test_a_paper_goal_acts_at_random_for_100_steps_updates_from_the_100th_and_re
     policies = PolicyRegistry(paper_store)
     trainer = Trainer(envs, policies, tmp_path / "checkpoints", profile=PAPER)
     try:
-        trainer.train(TrainSpec("", "new", "chunk1", step_budget=110, episode_tasks=("A0",), seed=1))
-        trainer.train(TrainSpec("", "chunk1", "chunk2", step_budget=110, episode_tasks=("A0",), seed=2,
+        trainer.train(TrainGoal("", "new", "chunk1", step_budget=110, episode_tasks=("A0",), seed=1))
+        trainer.train(TrainGoal("", "chunk1", "chunk2", step_budget=110, episode_tasks=("A0",), seed=2,
                                 keep_replay_buffer=True))
     finally:
         envs.close()
@@ -150,7 +151,7 @@ def test_a_goal_refuses_a_policy_of_another_profile_naming_both(tmp_path, paper_
     trainer = Trainer(None, policies, tmp_path / "checkpoints", profile=PAPER)
     with pytest.raises(ValueError, match="policy 'prior' was trained under learner profile 'glocal_ros', and this "
                                          "learner runs profile 'paper'"):
-        trainer.train(TrainSpec("A0", "prior", "out", step_budget=10))
+        trainer.train(TrainGoal("A0", "prior", "out", step_budget=10))
 
 
 def test_a_policy_of_an_older_observation_layout_is_refused_by_goals_and_evaluations(tmp_path, paper_store):
@@ -163,7 +164,7 @@ def test_a_policy_of_an_older_observation_layout_is_refused_by_goals_and_evaluat
     trainer = Trainer(None, policies, tmp_path / "checkpoints", profile=PAPER)
     message = f"policy 'new' was trained on observation layout 1, and the sim's is {OBSERVATION_LAYOUT}"
     with pytest.raises(ValueError, match=message):
-        trainer.train(TrainSpec("A0", "new", "out", step_budget=10))
+        trainer.train(TrainGoal("A0", "new", "out", step_budget=10))
     with pytest.raises(ValueError, match=message):
         trainer.evaluation_policy("new", ["A0"])
 
@@ -178,7 +179,7 @@ def test_evaluate_scores_a_policy_as_a_goals_check_before_its_first_step(tmp_pat
     trainer = Trainer(envs, policies, tmp_path / "checkpoints", profile=profile)
     checks = []
     try:
-        trainer.train(TrainSpec(task, "prior", "out", step_budget=2, eval_episodes=10, threshold=9.5,
+        trainer.train(TrainGoal(task, "prior", "out", step_budget=2, eval_episodes=10, threshold=9.5,
                                 stop_when_learned=True, seed=5),
                       on_evaluation=lambda score, steps: checks.append((steps, score.successes)))
         (score,) = evaluate(envs, trainer.evaluation_policy("prior", [task, "G6"]), [task], 10,
@@ -191,7 +192,7 @@ def test_evaluate_scores_a_policy_as_a_goals_check_before_its_first_step(tmp_pat
 def test_a_checkpoint_of_another_profile_or_recipe_is_refused_not_resumed(tmp_path):
     envs = BatchedEnvs(lambda i: GraspEnv("A0", config=SHORT), 2, "A0")
     policies = PolicyRegistry(PolicyStore(tmp_path / "store"), [PolicyStore(PROFILES["glocal_ros"].shipped_priors())])
-    spec = TrainSpec("A0", "prior", "out", step_budget=40, eval_episodes=1)
+    spec = TrainGoal("A0", "prior", "out", step_budget=40, eval_episodes=1)
     vector_steps = iter(range(1_000))
     try:
         stopped = Trainer(envs, policies, tmp_path / "checkpoints").train(

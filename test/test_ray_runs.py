@@ -15,7 +15,6 @@ Refusals are checked before anything starts, and OUT left as it was.
 from __future__ import annotations
 
 import io
-import socket
 import subprocess
 import sys
 import tarfile
@@ -23,7 +22,7 @@ from pathlib import Path
 
 import pytest
 
-from conftest import REPO
+from conftest import REPO, free_port
 from glocal_app.processes import RUN_FILE, STATE_FILE
 from glocal_app.ray_runs import DEFAULT_GCS_PORT, pack_run, parse_address, unpack_run
 from glocal_ros.recording import message_counts
@@ -36,13 +35,6 @@ RUNS = ["--preset", "smoke", "--strategies", "glocal,random", "--seeds", "0", "-
 
 def glocal_ros(*args: str, timeout: float = 120) -> subprocess.CompletedProcess:
     return subprocess.run([*CLI, *args], capture_output=True, text=True, timeout=timeout, cwd=REPO, env=graph_env())
-
-
-def free_port() -> int:
-    """A loopback port nothing listens on (bound, then let go)."""
-    with socket.socket() as probe:
-        probe.bind(("127.0.0.1", 0))
-        return probe.getsockname()[1]
 
 
 def snapshot(folder: Path) -> dict[str, bytes]:

@@ -15,6 +15,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
+from conftest import REPO
 from glocal_ros.analysis import figures
 from glocal_ros.analysis.estimates import milestone_estimates
 from glocal_ros.analysis.report import write_report
@@ -39,7 +40,6 @@ from glocal_ros.curriculum.codes import (
 from glocal_ros.recording import BagWriter, graph_typestore
 from glocal_ros.tasks import ALL_TASKS
 
-REPO = Path(__file__).resolve().parent.parent
 TS = graph_typestore()
 STATE_TYPE = "glocal_interfaces/msg/CurriculumState"
 EPISODE_TYPE = "glocal_interfaces/msg/EpisodeRecord"

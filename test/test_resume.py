@@ -16,10 +16,9 @@ import signal
 
 import pytest
 
-from conftest import REPO, wait_until
+from conftest import REPO, SMOKE, journal_lines, wait_for_clean_exit, wait_until
 from glocal_app.processes import NodeProcess
 
-SMOKE = REPO / "assets" / "params" / "smoke.yaml"
 SEED = 7
 RUN_SEC = 300  # a smoke run takes under a minute on an idle machine
 CHECKPOINT_INTERVAL = 20
@@ -43,13 +42,11 @@ def curriculum(folder) -> NodeProcess:
 
 
 def journal(folder) -> list[str]:
-    path = folder / "state" / "journal.jsonl"
-    return path.read_text().splitlines() if path.is_file() else []
+    return journal_lines(folder / "state")
 
 
 def finish(node: NodeProcess, others) -> None:
-    wait_until(lambda: node.process.poll() is not None, RUN_SEC, "the end of the run", processes=others)
-    assert node.process.returncode == 0, node.log()
+    wait_for_clean_exit(node, RUN_SEC, others)
 
 
 @pytest.fixture(scope="module")

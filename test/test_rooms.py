@@ -7,6 +7,7 @@ inside functions count as much as the ones at the top.
 """
 
 import ast
+import re
 import subprocess
 import sys
 from pathlib import Path
@@ -62,6 +63,36 @@ def test_rooms_import_only_what_they_may(room):
     breaches = [f"{path.relative_to(REPO)}:{line}: imports {root}"
                 for path in files for root, line in imported_roots(path).items() if root in FORBIDDEN[room]]
     assert breaches == []
+
+
+#: ``module.path:attribute``, as entry points (Gymnasium's, setuptools', pickle's) name code in a string.
+_ENTRY_POINT = re.compile(r"^([A-Za-z_]\w*)(?:\.\w+)*:[A-Za-z_]\w*$")
+
+
+def entry_point_roots(path: Path) -> dict[str, int]:
+    """Top-level packages that ``path`` names in an entry-point string, with the line of the first."""
+    roots: dict[str, int] = {}
+    for node in ast.walk(ast.parse(path.read_text(), str(path))):
+        if isinstance(node, ast.Constant) and isinstance(node.value, str):
+            match = _ENTRY_POINT.match(node.value)
+            if match:
+                roots.setdefault(match.group(1), node.lineno)
+    return roots
+
+
+@pytest.mark.parametrize("room", list(FORBIDDEN))
+def test_rooms_name_no_code_they_may_not_import_in_a_string(room):
+    breaches = [f"{path.relative_to(REPO)}:{line}: names {root} in an entry point"
+                for path in room_files(room) for root, line in entry_point_roots(path).items()
+                if root in FORBIDDEN[room]]
+    assert breaches == []
+
+
+def test_the_entry_point_check_sees_a_registration_by_string(tmp_path):
+    module = tmp_path / "registers.py"
+    module.write_text('import gymnasium\ngymnasium.register(id="x/Y-v0", entry_point="sim_node.grasp_env:GraspEnv")\n'
+                      'URL = "ws://127.0.0.1:8765"\n')
+    assert entry_point_roots(module) == {"sim_node": 2}
 
 
 def test_the_ast_check_sees_lazy_imports(tmp_path):

@@ -20,7 +20,8 @@ from glocal_ros.paths import assets_dir
 from learner_node.policies import PolicyRegistry
 from learner_node.policy_store import PolicyStore
 from learner_node.scalars import CSV_COLUMNS, CSV_FILE, EVALUATION_TAGS, PROGRESS_TAGS, GoalScalars
-from learner_node.training import Trainer, TrainSpec
+from glocal_ros.curriculum.learner import TrainGoal
+from learner_node.training import Trainer
 from sim_node.batch import BatchedEnvs
 from sim_node.grasp_env import GraspEnv, GraspEnvConfig
 
@@ -39,25 +40,27 @@ def goal(tmp_path_factory):
     work = tmp_path_factory.mktemp("scalars")
     envs = BatchedEnvs(lambda i: GraspEnv("A0", config=GraspEnvConfig(max_steps=10)), 2, "A0")
     policies = PolicyRegistry(PolicyStore(work / "store"), [PolicyStore(assets_dir() / "priors")])
-    reports, evaluations = [], []
+    reports, evaluations, told = [], [], []
     try:
         outcome = Trainer(envs, policies, work / "checkpoints", progress_interval_sec=0.0,
                           tensorboard_dir=work / "tensorboard").train(
-            TrainSpec("A0", "prior", "a0-goal", step_budget=40, eval_episodes=2, eval_interval=20, seed=3),
-            on_progress=reports.append, on_evaluation=lambda score, steps: evaluations.append((steps, score)))
+            TrainGoal("A0", "prior", "a0-goal", step_budget=40, eval_episodes=2, eval_interval=20, seed=3),
+            on_progress=lambda report: (reports.append(report), told.append(report)),
+            on_evaluation=lambda score, steps: (evaluations.append((steps, score)), told.append("evaluation")))
     finally:
         envs.close()
     assert outcome.completed
-    return work, reports, evaluations
+    after_evaluations = [told[i + 1] for i, what in enumerate(told) if what == "evaluation"]
+    return work, reports, evaluations, after_evaluations
 
 
 def test_tensorboard_lists_the_goal_with_the_numbers_it_reported(goal):
-    work, reports, evaluations = goal
+    work, reports, evaluations, after_evaluations = goal
     runs = read_runs(work / "tensorboard")
     assert list(runs) == ["a0-goal"], "one run per goal, named after its output policy"
     scalars = runs["a0-goal"]
     assert set(scalars) == {*PROGRESS_TAGS, *EVALUATION_TAGS}
-    assert len(reports) == 20  # every vector step of 2 envs
+    assert len(reports) == 22  # every vector step of 2 envs, and one after each evaluation
     for tag in PROGRESS_TAGS:
         expected = [(report.steps, float(np.float32(report.scalars()[tag]))) for report in reports
                     if not math.isnan(report.scalars()[tag])]
@@ -71,10 +74,21 @@ def test_tensorboard_lists_the_goal_with_the_numbers_it_reported(goal):
     assert scalars["eval/successes"] == [(steps, float(score.successes)) for steps, score in evaluations]
     assert [steps for steps, _ in evaluations] == [20, 40]
     assert scalars["eval/success_rate"] == [(steps, score.successes / 2) for steps, score in evaluations]
+    # Each evaluation's instruments: in the report right after it (the prior keeps experience: probes from it).
+    assert [report.steps for report in after_evaluations] == [20, 40]
+    for tag, name in (("instruments/q_parent_action", "q_parent_action"),
+                      ("instruments/action_distance", "action_distance"),
+                      ("instruments/policy_entropy", "policy_entropy")):
+        values = [getattr(report.instruments, name) for report in after_evaluations]
+        assert all(math.isfinite(value) for value in values), tag
+        assert scalars[tag] == [(report.steps, float(np.float32(value)))
+                                for report, value in zip(after_evaluations, values)], tag
+    assert after_evaluations[-1].instruments.action_distance > 0, "40 steps of SAC moved the actor"
+    assert math.isnan(reports[0].instruments.action_distance), "nothing measured before the first evaluation"
 
 
 def test_the_csv_beside_holds_the_same_rows(goal):
-    work, reports, evaluations = goal
+    work, reports, evaluations, _ = goal
     with (work / "tensorboard" / "a0-goal" / CSV_FILE).open() as stream:
         rows = list(csv.DictReader(stream))
     assert tuple(rows[0]) == CSV_COLUMNS

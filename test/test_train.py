@@ -263,7 +263,7 @@ class TestOnASharedGraph(SharedGraph):
 
 def test_a_killed_learner_resumes_the_goal_from_its_checkpoint(graph, ros_node):
     checkpoint = graph["policy_dir"] / ".checkpoints" / "trained" / "checkpoint.json"
-    goal = Goal(graph["train"], train_goal(step_budget=400))
+    Goal(graph["train"], train_goal(step_budget=400))  # to the learner killed below, which never answers it
     wait_until(lambda: checkpoint.is_file() and json.loads(checkpoint.read_text())["state"]["steps_used"] >= 80,
                120, "a checkpoint at 80 steps or more", processes=[graph["learner"]])
     graph["learner"].process.kill()
@@ -318,11 +318,11 @@ def test_a_client_whose_learner_dies_sends_the_goal_again_and_it_resumes(graph, 
     """The curriculum's client notices the learner's action server leave the graph, waits for a new
     learner, and sends the same goal, which resumes from its checkpoint."""
     from curriculum_node.ros_learner import RosLearner
-    from glocal_ros.curriculum.learner import TrainRequest
+    from glocal_ros.curriculum.learner import TrainGoal
 
     checkpoint = graph["policy_dir"] / ".checkpoints" / "trained" / "checkpoint.json"
     learner = RosLearner(ros_node, timeout_sec=120)
-    request = TrainRequest(task="A0", initial_policy="prior", output_policy="trained", step_budget=400,
+    request = TrainGoal(task="A0", initial_policy="prior", output_policy="trained", step_budget=400,
                            threshold=1.0, eval_episodes=2, stop_when_learned=False)
     outcome: dict = {}
     client = threading.Thread(target=lambda: outcome.update(result=learner.train(request)), daemon=True)
@@ -438,7 +438,7 @@ def test_the_stop_rule_ends_a_goal_at_the_evaluation_that_passed(tmp_path, monke
     evaluated = []
     try:
         outcome = training.Trainer(envs, policies, tmp_path / "checkpoints").train(
-            training.TrainSpec("A0", "prior", "out", step_budget=8, eval_interval=2, eval_episodes=10,
+            training.TrainGoal("A0", "prior", "out", step_budget=8, eval_interval=2, eval_episodes=10,
                                threshold=8.5, stop_when_learned=True),
             on_evaluation=lambda score, steps: evaluated.append((steps, score.successes)))
     finally:
@@ -453,14 +453,15 @@ def test_a_policy_that_passes_already_is_stored_without_training(tmp_path):
     from glocal_ros.paths import assets_dir
     from learner_node.policies import PolicyRegistry
     from learner_node.policy_store import PolicyStore
-    from learner_node.training import Trainer, TrainSpec
+    from glocal_ros.curriculum.learner import TrainGoal
+    from learner_node.training import Trainer
     from sim_node.batch import BatchedEnvs
     from sim_node.grasp_env import GraspEnv
 
     envs = BatchedEnvs(lambda i: GraspEnv("A0"), 2, "A0")
     policies = PolicyRegistry(PolicyStore(tmp_path / "store"), [PolicyStore(assets_dir() / "priors")])
     try:
-        outcome = Trainer(envs, policies, tmp_path / "checkpoints").train(TrainSpec(
+        outcome = Trainer(envs, policies, tmp_path / "checkpoints").train(TrainGoal(
             "A0", "prior", "a0", step_budget=1_000, threshold=0, eval_episodes=4, eval_interval=500,
             stop_when_learned=True))
     finally:
@@ -475,7 +476,8 @@ def test_a_goal_never_trains_past_its_budget_and_ends_at_its_episode_limit(tmp_p
     from glocal_ros.paths import assets_dir
     from learner_node.policies import PolicyRegistry
     from learner_node.policy_store import PolicyStore
-    from learner_node.training import Trainer, TrainSpec
+    from glocal_ros.curriculum.learner import TrainGoal
+    from learner_node.training import Trainer
     from sim_node.batch import BatchedEnvs
     from sim_node.grasp_env import GraspEnv, GraspEnvConfig
 
@@ -484,8 +486,8 @@ def test_a_goal_never_trains_past_its_budget_and_ends_at_its_episode_limit(tmp_p
     trainer = Trainer(envs, policies, tmp_path / "checkpoints", seed=3)
     listed = ("B0", "C3", "D2", "E1", "F0", "G6", "A1", "B2", "C4", "D5")
     try:
-        odd = trainer.train(TrainSpec("", "prior", "odd", step_budget=41, episode_tasks=("A0",), seed=1))
-        limited = trainer.train(TrainSpec("", "prior", "limited", step_budget=1_000, episode_tasks=listed,
+        odd = trainer.train(TrainGoal("", "prior", "odd", step_budget=41, episode_tasks=("A0",), seed=1))
+        limited = trainer.train(TrainGoal("", "prior", "limited", step_budget=1_000, episode_tasks=listed,
                                           episode_limit=3, seed=2))
     finally:
         envs.close()
@@ -511,11 +513,12 @@ def test_a_goal_resumed_from_its_checkpoint_ends_as_the_uninterrupted_goal(tmp_p
     from learner_node.evaluation import evaluate
     from learner_node.policies import PolicyRegistry
     from learner_node.policy_store import PolicyStore
-    from learner_node.training import CHECKPOINT_FILE, Trainer, TrainSpec
+    from glocal_ros.curriculum.learner import TrainGoal
+    from learner_node.training import CHECKPOINT_FILE, Trainer
     from sim_node.batch import BatchedEnvs
     from sim_node.grasp_env import GraspEnv, GraspEnvConfig
 
-    spec = TrainSpec("A0", "prior", "goal", step_budget=600, eval_episodes=2, eval_interval=200, seed=11)
+    spec = TrainGoal("A0", "prior", "goal", step_budget=600, eval_episodes=2, eval_interval=200, seed=11)
     copy = tmp_path / "copy"
 
     def run(name: str, trainer_seed: int, between_steps=lambda: False):

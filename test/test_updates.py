@@ -8,7 +8,8 @@ from glocal_ros.paths import assets_dir
 from learner_node.policies import PolicyRegistry
 from learner_node.policy_store import PolicyStore
 from learner_node.sac_settings import SAC_KWARGS, FineTuning, fine_tuning_recipe
-from learner_node.training import Trainer, TrainSpec
+from glocal_ros.curriculum.learner import TrainGoal
+from learner_node.training import Trainer
 from learner_node.updates import OverlappedUpdates
 from sim_node.batch import BatchedEnvs
 from sim_node.grasp_env import GraspEnv
@@ -62,7 +63,7 @@ def test_each_steps_updates_run_during_the_next_step_and_the_last_at_the_end(tmp
     step_budget = batch_size + num_envs * vector_steps_with_updates
     try:
         # SB3's own start (random-first): updates from batch_size steps on, as the plain loop does.
-        outcome = Trainer(envs, policies, tmp_path / "checkpoints", fine_tuning=FineTuning()).train(TrainSpec(
+        outcome = Trainer(envs, policies, tmp_path / "checkpoints", fine_tuning=FineTuning()).train(TrainGoal(
             "A0", "prior", "a0", step_budget=step_budget, threshold=0, eval_episodes=1))
     finally:
         envs.envs.close()
@@ -106,7 +107,7 @@ def test_a_recipe_chooses_the_first_actions_and_the_rate_and_updates_wait_for_a_
     noting_payments(monkeypatch, counted_payment)
     step_budget = batch + num_envs * 20
     try:
-        outcome = Trainer(envs, policies, tmp_path / "checkpoints", fine_tuning=tuning).train(TrainSpec(
+        outcome = Trainer(envs, policies, tmp_path / "checkpoints", fine_tuning=tuning).train(TrainGoal(
             "A0", "prior", "a0", step_budget=step_budget, threshold=0, eval_episodes=1))
     finally:
         envs.close()
@@ -159,7 +160,7 @@ def test_critic_warmup_leaves_the_actor_alone_for_the_first_steps_then_updates_b
     policies = PolicyRegistry(PolicyStore(tmp_path / "store"), [PolicyStore(assets_dir() / "priors")])
     try:
         outcome = Trainer(envs, policies, tmp_path / "checkpoints", fine_tuning=FineTuning(
-            first_actions="policy", batch_size=batch, critic_warmup=warmup)).train(TrainSpec(
+            first_actions="policy", batch_size=batch, critic_warmup=warmup)).train(TrainGoal(
                 "A0", "prior", "a0", step_budget=step_budget, threshold=0, eval_episodes=1))
     finally:
         envs.close()
@@ -200,7 +201,7 @@ def test_parent_experience_starts_the_buffer_and_the_stored_policy_keeps_the_new
     noting_payments(monkeypatch, counted_payment)
     tuning = FineTuning(first_actions="policy", experience=300)
     try:
-        outcome = Trainer(envs, policies, tmp_path / "checkpoints", fine_tuning=tuning).train(TrainSpec(
+        outcome = Trainer(envs, policies, tmp_path / "checkpoints", fine_tuning=tuning).train(TrainGoal(
             "B1", "prior", "b1", step_budget=step_budget, threshold=0, eval_episodes=1))
     finally:
         envs.close()

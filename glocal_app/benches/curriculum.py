@@ -91,7 +91,7 @@ def check_bench(strategies: Sequence[str], seeds: Sequence[int], preset: str, ou
                 step_budget: int | None, learner_profile: str | None = None, keep: Path | None = None) -> None:
     """``ValueError`` for what ``experiment`` refuses, and for any run under OUT or ``keep`` of another preset,
     budget or learner profile."""
-    from glocal_app.launch import check_experiment
+    from glocal_app.experiment import check_experiment
 
     check_experiment(strategies, seeds, preset, out, step_budget, learner_profile=learner_profile)
     for run_dir in bench_run_dirs(out) + (bench_run_dirs(keep) if keep is not None else []):

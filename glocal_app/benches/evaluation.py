@@ -36,7 +36,7 @@ import time
 from contextlib import ExitStack, closing
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Callable, Sequence
+from typing import Callable
 
 import numpy as np
 
@@ -101,7 +101,7 @@ def run_eval_bench(num_envs: int, eval_envs: int, episodes: int, rounds: int, pr
     from learner_node.sim_client import SimClient
     from learner_node.training import Trainer
     from node_common import names
-    from node_common.calls import call_checked, wait_for_service
+    from node_common.calls import call_checked
     from sim_node.grasp_env import GraspEnvConfig
     from sim_node.parallel import ProcessBatchedEnvs
 

@@ -98,7 +98,7 @@ def run_graph_bench(goals: int, evaluations: int, steps: int,
     from glocal_interfaces.srv import Evaluate, StepEnvs
 
     from curriculum_node.ros_learner import RosLearner
-    from glocal_ros.curriculum.learner import TrainRequest
+    from glocal_ros.curriculum.learner import TrainGoal
     from node_common import names
     from node_common.arrays import to_float32_field
     from node_common.calls import call_checked
@@ -124,7 +124,7 @@ def run_graph_bench(goals: int, evaluations: int, steps: int,
             sent = iter(range(10**9))
 
             def train(index: int) -> None:
-                learner.train(TrainRequest(task="A0", initial_policy="prior", output_policy=f"bench-{next(sent)}",
+                learner.train(TrainGoal(task="A0", initial_policy="prior", output_policy=f"bench-{next(sent)}",
                                            step_budget=NUM_ENVS, threshold=0.0, eval_episodes=1,
                                            stop_when_learned=False))
 

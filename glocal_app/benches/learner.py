@@ -52,7 +52,7 @@ import tempfile
 import threading
 import time
 from contextlib import ExitStack
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from pathlib import Path
 from typing import Callable, Sequence
 
@@ -67,10 +67,13 @@ from learner_node.policies import PolicyRegistry
 from learner_node.policy_store import PolicyStore
 from learner_node.profiles import DEFAULT_PROFILE, PROFILES, LearnerProfile
 from learner_node.sac_settings import DEFAULT_NETWORK, NETWORKS, SAC_KWARGS, COMPUTE_THREADS
-from learner_node.training import Trainer, TrainSpec
+from glocal_ros.curriculum.learner import TrainGoal
+from learner_node.training import Trainer
 
 #: Env steps of a goal after the update-free warm-up before the clock starts.
 SETTLE_STEPS = 64
+#: Writes of a progress report timed alone for ``--curves``.
+CURVES_WRITES = 2000
 TASK = "G3"
 INITIAL_POLICY = "prior"
 BATCH_SIZE = NETWORKS[DEFAULT_NETWORK].batch_size  # the shipped prior's (train-prior's default network)
@@ -87,6 +90,7 @@ class LearnerBenchRow:
     rounds: tuple[tuple[float, ...], ...] = ()  # every measurement, per variant (``variant_names``)
     env_floor: float | None = None  # env steps/s of the envs alone in this process, random actions
     with_curves: float | None = None  # in-process with training curves written at every report; None: not measured
+    curves_write: float | None = None  # seconds per write of a progress report's curves, measured alone
 
     @property
     def ratio(self) -> float:
@@ -133,11 +137,27 @@ def train_steps_per_second(envs: BatchStepper, policies: PolicyRegistry, work_di
     trainer = Trainer(envs, policies, work_dir / ".checkpoints", seed, checkpoint_interval=10**12,
                       progress_interval_sec=0.0, profile=profile, tensorboard_dir=tensorboard_dir)
     warmup = warmup_steps(num_envs)
-    spec = TrainSpec(task=TASK, initial_policy=INITIAL_POLICY, output_policy=output_policy,
+    spec = TrainGoal(task=TASK, initial_policy=INITIAL_POLICY, output_policy=output_policy,
                      step_budget=warmup + steps, threshold=0.0, eval_episodes=1, eval_interval=0)
     marks: list[tuple[float, int]] = []
     trainer.train(spec, on_progress=lambda progress: marks.append((time.perf_counter(), progress.steps)))
     return timed_rate(marks, warmup)
+
+
+def seconds_per_curves_write(folder: Path, writes: int = CURVES_WRITES) -> float:
+    """Wall-clock seconds per ``GoalScalars.write`` of a progress report's scalars, ``writes`` in a row."""
+    from learner_node.scalars import GoalScalars
+    from learner_node.training import TrainProgress
+
+    report = TrainProgress(1000, 2000, 40, 0.5, 15.0, 300.0, 12.5, -3.2, 0.4, 0.05).scalars()
+    scalars = GoalScalars(folder)
+    try:
+        started = time.perf_counter()
+        for step in range(writes):
+            scalars.write(step, report)
+        return (time.perf_counter() - started) / writes
+    finally:
+        scalars.close()
 
 
 def timed_rate(marks: Sequence[tuple[float, int]], warmup: int) -> float:
@@ -265,6 +285,9 @@ def run_learner_bench(env_counts: Sequence[int], steps: int, rounds: int, learne
                        if learner_node else "")
                     + f"; env floor {row.env_floor:.1f}, graph / floor {row.floor_ratio:.2f}"
                     + (f"; in-process with curves {row.with_curves:.1f}, ratio {row.curves_ratio:.2f}" if curves else ""))
+                if curves:
+                    row = replace(row, curves_write=statistics.median(
+                        seconds_per_curves_write(work / "writes" / f"{profile}-{num_envs}-{index}") for index in range(3)))
                 rows.append(row)
             finally:
                 batch.close()
@@ -315,15 +338,17 @@ def learner_bench_report(rows: Sequence[LearnerBenchRow], command: str, steps: i
     if curved:
         lines += ["", "Training curves (`--curves`): the in-process goal writing its TensorBoard events and CSV "
                   "(`learner_node.scalars`) at every progress report, here every vector step: a worst case for "
-                  "learner_node, which writes about once a second. A write's cost: N / (with curves) - N / "
-                  "(in-process) seconds, from the medians; at one write a second it is that share of the "
-                  "learner's time.", "",
+                  "learner_node, which writes about once a second. A write's cost, two ways: from the rates, "
+                  "N / (with curves) - N / (in-process) seconds (medians; as noisy as the rates), and timed "
+                  f"alone, {CURVES_WRITES} writes of a progress report in a row (median of 3). At one write a "
+                  "second a write's cost in seconds is its share of the learner's time.", "",
                   "| profile | N envs | in-process | with curves | ratio with curves / in-process | "
-                  "ratios in the same round | a write (ms) | share at 1 Hz |",
-                  "| --- | ---: | ---: | ---: | ---: | --- | ---: | ---: |"]
+                  "ratios in the same round | a write from the rates (ms) | a write alone (ms) | share at 1 Hz |",
+                  "| --- | ---: | ---: | ---: | ---: | --- | ---: | ---: | ---: |"]
         lines += [f"| {r.profile} | {r.num_envs} | {r.in_process:.1f} | {r.with_curves:.1f} | {r.curves_ratio:.3f} | "
                   + ", ".join(f"{v / base:.3f}" for v, base in zip(r.rounds[-1], r.rounds[0]))
-                  + f" | {1000 * r.seconds_per_curves_write:.2f} | {100 * r.seconds_per_curves_write:.3f}% |"
+                  + f" | {1000 * r.seconds_per_curves_write:.2f} | {maybe(None if r.curves_write is None else 1000 * r.curves_write, 3)} "
+                  f"| {maybe(None if r.curves_write is None else 100 * r.curves_write, 4)}% |"
                   for r in curved]
     lines += ["", "Every round, in order (env steps/s):", ""]
     for r in rows:

@@ -84,7 +84,7 @@ class TransferSettings:
     eval_episodes: int = 20
     threshold_fraction: float = PAPER_THRESHOLD_FRACTION  # B as a share of eval_episodes: the paper's 75 of 100
     num_envs: int = 4
-    #: Stop each goal at its first score above B, as a curriculum's goal stops (``TrainSpec.stop_when_learned``):
+    #: Stop each goal at its first score above B, as a curriculum's goal stops (``TrainGoal.stop_when_learned``):
     #: the goal's own check before its first step is then the curve's step 0, and the curve ends where it passed.
     stop_at_threshold: bool = False
     #: Where the goals' envs load the objects from; None: the shipped set (``sim_node.grasp_env``).
@@ -183,7 +183,8 @@ def run_chain(recipe: str, prior: str, tasks: Sequence[str], seed: int, settings
     from learner_node.evaluation import evaluate
     from learner_node.policies import PolicyRegistry
     from learner_node.policy_store import PolicyStore
-    from learner_node.training import EVALUATION_STREAM, Trainer, TrainSpec
+    from glocal_ros.curriculum.learner import TrainGoal
+    from learner_node.training import EVALUATION_STREAM, Trainer
     from sim_node.batch import BatchedEnvs
     from sim_node.grasp_env import GraspEnv
 
@@ -204,7 +205,7 @@ def run_chain(recipe: str, prior: str, tasks: Sequence[str], seed: int, settings
                                     settings.eval_episodes, seed=derived_seed(seed, EVALUATION_STREAM, 0))
                 curve.append((0, start.successes))
             output = f"transfer-{number}"
-            trainer.train(TrainSpec(task=task, initial_policy=start_policy, output_policy=output,
+            trainer.train(TrainGoal(task=task, initial_policy=start_policy, output_policy=output,
                                     step_budget=settings.step_budget, threshold=settings.threshold,
                                     eval_episodes=settings.eval_episodes, eval_interval=settings.eval_interval,
                                     stop_when_learned=settings.stop_at_threshold, seed=seed),
@@ -296,7 +297,7 @@ def run_transfer_graph(recipes: Sequence[str], tasks: Sequence[str], seeds: Sequ
 
     from curriculum_node.ros_learner import RosLearner
     from glocal_app.processes import NodeProcess, isolated_environment, namespace_arguments
-    from glocal_ros.curriculum.learner import TrainRequest
+    from glocal_ros.curriculum.learner import TrainGoal
     from glocal_ros.domain import reserve_domain_id
     from glocal_ros.seeds import derived_seed
     from learner_node.policy_store import PolicyStore
@@ -352,7 +353,7 @@ def run_transfer_graph(recipes: Sequence[str], tasks: Sequence[str], seeds: Sequ
                     started = time.perf_counter()
                     start = learner.evaluate(prior, [task], settings.eval_episodes,
                                              seed=derived_seed(seed, EVALUATION_STREAM, 0))[task]
-                    learner.train(TrainRequest(task, prior, output, settings.step_budget,
+                    learner.train(TrainGoal(task, prior, output, settings.step_budget,
                                                threshold=settings.threshold, eval_episodes=settings.eval_episodes,
                                                eval_interval=settings.eval_interval, stop_when_learned=False,
                                                seed=seed))

@@ -20,7 +20,6 @@ from pathlib import Path
 from glocal_ros.analysis.estimates import Interval, MilestoneEstimates, few_seeds_note, milestone_estimates
 from glocal_ros.analysis.runs import (
     CURRICULUM_STATE_TOPIC,
-    EPISODES_TOPIC,
     REFERENCE_STRATEGY,
     MilestoneTable,
     RunData,
@@ -31,6 +30,7 @@ from glocal_ros.analysis.runs import (
     read_runs,
 )
 from glocal_ros.recording import table_topic
+from glocal_ros.topics import EPISODES_TOPIC
 
 REPORT_NAME = "report.md"
 LEARNED_VS_STEPS_PNG = "learned_vs_steps.png"

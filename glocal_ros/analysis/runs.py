@@ -34,7 +34,7 @@ from glocal_ros.curriculum.codes import (
 from glocal_ros.recording import graph_typestore, table_topic
 from glocal_ros.sim_contract import PHASE_EVAL
 from glocal_ros.tasks import UnknownTaskError, sorted_tasks
-from glocal_ros.topics import CURRICULUM_STATE, EPISODES, EPISODES_TOPIC, TopicSpec
+from glocal_ros.topics import CURRICULUM_STATE, EPISODES, TopicSpec
 
 CURRICULUM_STATE_TOPIC = CURRICULUM_STATE.name
 

@@ -56,7 +56,7 @@ import numpy as np
 
 from glocal_ros.analysis.runs import _messages, find_bags
 from glocal_ros.curriculum.journal import JournaledLearner, train_result
-from glocal_ros.curriculum.learner import TrainRequest, TrainResult
+from glocal_ros.curriculum.learner import TrainGoal, TrainResult
 from glocal_ros.curriculum.run import Run, RunConfig, RunState
 from glocal_ros.curriculum.strategies import run_strategy
 from glocal_ros.topics import CURRICULUM_STATE, EVALUATIONS
@@ -276,7 +276,7 @@ class RecordedLearner:
         self.evaluated = 0
         self.last_seconds = 0.0
 
-    def train(self, request: TrainRequest) -> TrainResult:
+    def train(self, request: TrainGoal) -> TrainResult:
         recorded = self.goals.get(request.task, [])
         turn = self.trained[request.task]
         self.trained[request.task] += 1

@@ -48,7 +48,7 @@ from typing import Callable, Protocol
 import numpy as np
 
 from glocal_ros.curriculum.alp_gmm import AlpGmmSampler
-from glocal_ros.curriculum.learner import TrainRequest, passes_threshold
+from glocal_ros.curriculum.learner import TrainGoal, passes_threshold
 from glocal_ros.curriculum.codes import ROLE_SAMPLED
 from glocal_ros.curriculum.run import Run
 
@@ -105,7 +105,7 @@ def run_sampled(run: Run, sampler: TaskSampler, chunk_episodes: Callable[[], int
         chunk = chunk_episodes()
         tasks = tuple(sampler.sample() for _ in range(chunk + TASKS_AHEAD))
         to_evaluation = next_evaluation - run.state.total_steps
-        result = run.train(ROLE_SAMPLED, TrainRequest(
+        result = run.train(ROLE_SAMPLED, TrainGoal(
             task="", episode_tasks=tasks, episode_limit=chunk, initial_policy=initial, output_policy=policy,
             step_budget=min(chunk * max_episode_steps, to_evaluation), stop_when_learned=False,
             keep_replay_buffer=True,

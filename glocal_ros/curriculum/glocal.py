@@ -64,7 +64,7 @@ from __future__ import annotations
 import numpy as np
 
 from glocal_ros.clustering import cluster_tasks, split_global_local
-from glocal_ros.curriculum.learner import TrainRequest, TrainResult
+from glocal_ros.curriculum.learner import TrainGoal, TrainResult
 from glocal_ros.curriculum.codes import ROLE_CLUSTER, ROLE_GLOBAL, ROLE_LOCAL
 from glocal_ros.curriculum.run import Run
 
@@ -148,7 +148,7 @@ def _start_task(run: Run, role: int, task: str, initial: str, output: str, key: 
             run.mark_learned(task, output)
 
     config = run.config
-    run.start_train(role, TrainRequest(
+    run.start_train(role, TrainGoal(
         task=task, initial_policy=initial, output_policy=output, step_budget=config.task_step_budget,
         eval_interval=config.eval_interval, stop_when_learned=True,
     ), key, done)
@@ -173,7 +173,7 @@ def _train_task(run: Run, role: int, task: str, initial: str, output: str) -> bo
     if run.over:
         return False
     config = run.config
-    result = run.train(role, TrainRequest(
+    result = run.train(role, TrainGoal(
         task=task, initial_policy=initial, output_policy=output, step_budget=config.task_step_budget,
         eval_interval=config.eval_interval, stop_when_learned=True,
     ))

@@ -38,7 +38,7 @@ from dataclasses import asdict, replace
 from pathlib import Path
 from typing import Any, Callable, Sequence
 
-from glocal_ros.curriculum.learner import EpisodeSummary, Learner, TrainRequest, TrainResult
+from glocal_ros.curriculum.learner import EpisodeSummary, Learner, TrainGoal, TrainResult
 from glocal_ros.seeds import derived_seed
 
 
@@ -74,7 +74,7 @@ class JournaledLearner:
         return self._call("evaluate", arguments, lambda: self.learner.evaluate(policy, tasks, episodes, seed),
                           lambda answer: answer, lambda answer: {"evaluation_episodes": episodes * len(answer)})
 
-    def train(self, request: TrainRequest) -> TrainResult:
+    def train(self, request: TrainGoal) -> TrainResult:
         if request.seed is None:
             request = replace(request, seed=self._call_seed())
         return self._call("train", asdict(request), lambda: self.learner.train(request), _train_result,

@@ -17,19 +17,22 @@ def paper_threshold(eval_episodes: int = PAPER_EVAL_EPISODES) -> float:
 
 
 @dataclass(frozen=True)
-class TrainRequest:
-    """Train ``initial_policy`` into ``output_policy`` (see glocal_interfaces/action/Train.action)."""
+class TrainGoal:
+    """Train ``initial_policy`` into ``output_policy``: one Train goal, as the curriculum asks it and the
+    learner runs it (glocal_interfaces/action/Train.action; ``node_common.train_goal`` is the one
+    translation to and from the message and its sentinels). A run's goals carry its B and S-bar
+    (``Run.train``)."""
 
     task: str  # whose score decides "learned"; "" when only episode_tasks are trained
     initial_policy: str
     output_policy: str
     step_budget: int
-    threshold: float | None = None  # B: learned when the score is above it; None: the run's (``Run.train``)
-    eval_episodes: int | None = None  # S-bar; None: the run's
+    threshold: float = paper_threshold()  # B: learned when the score is above it
+    eval_episodes: int = PAPER_EVAL_EPISODES  # S-bar
     episode_tasks: tuple[str, ...] = ()  # tasks of successive episodes; () trains ``task``
     episode_limit: int = 0  # end the goal once this many training episodes have finished; 0: no limit
     eval_interval: int = 0  # env steps between evaluations of ``task``; 0: at the end only
-    stop_when_learned: bool = True
+    stop_when_learned: bool = False  # end the goal at the first evaluation above B (checked before its first step)
     keep_replay_buffer: bool = False
     seed: int | None = None  # None: the learner's own random streams; else the goal is repeatable
 
@@ -61,7 +64,7 @@ class Learner(Protocol):
     def evaluate(self, policy: str, tasks: Sequence[str], episodes: int, seed: int | None = None) -> dict[str, float]:
         """Score ``policy`` on every task: successes out of ``episodes`` runs (repeatable with a ``seed``)."""
 
-    def train(self, request: TrainRequest) -> TrainResult:
+    def train(self, request: TrainGoal) -> TrainResult:
         """Train as ``request`` says; blocks until the goal ends."""
 
     def copy(self, source: str, destination: str) -> None:

@@ -60,7 +60,7 @@ from glocal_ros.curriculum.codes import (
     STATUS_TRAINING, STATUS_TRAINING_GLOBAL, STATUS_TRAINING_LOCAL, BASELINE_TASKS,
 )
 from glocal_ros.curriculum.journal import CallJournal, JournalMismatch, plain, train_result
-from glocal_ros.curriculum.learner import (PAPER_EVAL_EPISODES, Learner, ReturningLearner, TrainRequest,
+from glocal_ros.curriculum.learner import (PAPER_EVAL_EPISODES, Learner, ReturningLearner, TrainGoal,
                                            TrainResult, paper_threshold)
 from glocal_ros.seeds import derived_seed
 from glocal_ros.tasks import sorted_tasks, validate_tasks
@@ -282,7 +282,7 @@ class Run:
         self.state.evaluation_episodes += self.config.eval_episodes * len(tasks)
         return scores
 
-    def train(self, role: int, request: TrainRequest) -> TrainResult:
+    def train(self, role: int, request: TrainGoal) -> TrainResult:
         """Run one goal, its budget clipped to what the run has left, judged by the run's B and S-bar."""
         steps_left = self.steps_left
         request = replace(request, step_budget=min(request.step_budget, steps_left),
@@ -316,7 +316,7 @@ class Run:
                           lambda learner: learner.evaluate(policy, list(tasks), episodes, seed), lambda a: a,
                           lambda answer: {"evaluation_episodes": episodes * len(answer)}, done))
 
-    def start_train(self, role: int, request: TrainRequest, key: str,
+    def start_train(self, role: int, request: TrainGoal, key: str,
                     when_done: Callable[[TrainResult], None]) -> None:
         """Queue one goal, clipped to the steps left after those in flight (at least 1 must be left)."""
         steps_left = self.steps_left
