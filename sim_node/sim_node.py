@@ -21,8 +21,11 @@ their shares in parallel (``sim_node.parallel``); by default one per core.
 
 Evaluation has envs of its own: resets and steps of phase eval go to
 ``eval_envs`` envs (numbered after the training envs in the episode
-records), made at the first such request and split over ``workers``
-processes of their own. A deterministic episode needs no learner between
+records), split over ``workers`` processes of their own. They are made
+right after start-up, on the sim's callback group (a request waits for
+them), while the other nodes of a graph start: made at the first
+evaluation instead, they kept a graph quiet for as long as that takes (12 s
+on a loaded 2-core machine), which a launch's watchdog reads as a stall. A deterministic episode needs no learner between
 steps but the policy's one call per batch, so the more envs a step carries
 the less the round trip weighs: ``bench eval``. ``eval_envs:=0`` serves
 evaluations on the training envs.
@@ -38,6 +41,7 @@ from builtin_interfaces.msg import Time
 from glocal_interfaces.msg import EpisodeRecord
 from glocal_interfaces.srv import ResetEnvs, StepEnvs
 from rclpy.callback_groups import MutuallyExclusiveCallbackGroup
+from rclpy.clock import Clock as RclpyClock, ClockType
 from rclpy.node import Node
 from rclpy.time import Time as RclpyTime
 from rosgraph_msgs.msg import Clock
@@ -129,11 +133,23 @@ class SimNode(Node):
             self.viewer_period_ns = round(1e9 / viewer_rate)
             if not self.use_sim_time:
                 self.create_timer(1.0 / viewer_rate, self.publish_viewer_state, callback_group=sim_group)
+        if self._make_eval_batch is not None:
+            self._eval_timer = self.create_timer(0.01, self.make_eval_batch, callback_group=sim_group,
+                                                 clock=RclpyClock(clock_type=ClockType.STEADY_TIME))
         self.get_logger().info(
             f"{num_envs} envs in {min(num_envs, workers)} process{'es' if min(num_envs, workers) > 1 else ''} on "
             f"task {initial_task}, {eval_envs or 'no'} evaluation envs of their own, "
             f"obs {self.batch.obs_dim}, action {self.batch.action_dim}"
         )
+
+    def make_eval_batch(self) -> None:
+        """Once, after start-up: the evaluation envs. A failure is logged; the first evaluation tries again
+        and answers with it."""
+        self.destroy_timer(self._eval_timer)
+        try:
+            self.batch_of(PHASE_EVAL)
+        except Exception as error:  # noqa: BLE001 - the node keeps serving; the request says what failed
+            self.get_logger().error(f"the evaluation envs could not be made: {type(error).__name__}: {error}")
 
     def batch_of(self, phase: int):
         """The envs that serve ``phase``: the evaluation envs (made now if not yet) or the training ones."""
