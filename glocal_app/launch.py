@@ -8,7 +8,8 @@ SIGINT, so the bag is closed cleanly, and the report is written from the
 run's bags. Ctrl-C does the same at any time, and the same command resumes
 the run: RUN_DIR keeps the curriculum's journal (``curriculum/``), the
 learner's policies and checkpoints (``policies/``), one bag per launch
-(``bag/``, ``bag.1/``, ...), ``logs/`` and ``report/``; with a Foxglove endpoint, also the
+(``bag/``, ``bag.1/``, ...), the training curves (``tensorboard/``, or ``--tensorboard DIR``),
+``logs/`` and ``report/``; with a Foxglove endpoint, also the
 Foxglove layout written for the run's namespace (``foxglove-layout.json``,
 ``glocal_ros.foxglove_layout``), which opens the live graph and the run's bags alike.
 
