@@ -66,6 +66,7 @@ import shutil
 import time
 from collections import deque
 from dataclasses import asdict, dataclass, field
+from functools import cached_property
 from pathlib import Path
 from typing import Callable, Sequence
 
@@ -81,6 +82,7 @@ from learner_node.instruments import GoalInstruments, Instruments
 from learner_node.model_files import load_model, write_model
 from learner_node.policies import RANDOM_POLICY, PolicyRegistry, deterministic_actions
 from learner_node.policy_store import PolicyRecord, check_name
+from learner_node.replay_buffer import Experience
 from learner_node.profiles import DEFAULT_PROFILE, PROFILES, LearnerProfile
 from learner_node.sac_settings import FineTuning, seed_keys
 from learner_node.scalars import RECENT_EPISODES, GoalScalars
@@ -334,7 +336,7 @@ class _Goal:
                                    between_steps=self.between_steps,
                                    time_limit_terminal=trainer.profile.time_limit_terminal)
         self.model, self.ring, self.resumed = self.model_to_train()
-        self.instruments = GoalInstruments(initial, trainer.policies.experience(spec.initial_policy))
+        self.instruments = GoalInstruments(initial, self.parent_experience)
         self.latest_instruments = Instruments()
         self.seed_streams()
         self.tune()
@@ -391,12 +393,17 @@ class _Goal:
         start_fine_tuning(model, self.tuning, spec.episode_tasks or (spec.task,))
         return model, ring, 0
 
+    @cached_property
+    def parent_experience(self) -> Experience | None:
+        """The transitions the initial policy keeps, read once: the buffer's start and the instruments' probes."""
+        return self.trainer.policies.experience(self.spec.initial_policy)
+
     def start_buffer(self, model, ring: TransitionRing) -> None:
         """Fill the new model's empty buffer with the initial policy's experience (``FineTuning.experience``),
         and act as ``FineTuning.first_actions`` says until its random steps are over (``OverlappedUpdates``
         waits for a batch in the buffer)."""
         if self.tuning.experience:
-            experience = self.trainer.policies.experience(self.spec.initial_policy)
+            experience = self.parent_experience
             if experience is not None:
                 ring.add({name: values[-self.tuning.experience:] for name, values in experience.items()})
         random_steps = 0
