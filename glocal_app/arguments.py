@@ -8,7 +8,7 @@ from pathlib import Path
 
 from glocal_app.ray_runs import DEFAULT_CPUS_PER_RUN
 from glocal_ros.curriculum.codes import STRATEGY_NAMES
-from learner_node.profiles import DEFAULT_PROFILE, PROFILES
+from learner_node.profiles import DEFAULT_PROFILE, PROFILES, learner_profile
 
 def command_line() -> str:
     """The command as the user typed it: benches write it beside what it produced."""
@@ -28,13 +28,18 @@ def number_list(text: str) -> list[int]:
     return [int(item) for item in items]
 
 
+def profile_name(text: str) -> str:
+    """An argparse type: a learner profile, with departures or not (``learner_node.profiles.learner_profile``),
+    as its canonical name."""
+    try:
+        return learner_profile(text.strip()).name
+    except ValueError as error:
+        raise argparse.ArgumentTypeError(str(error)) from None
+
+
 def profile_list(text: str) -> list[str]:
-    """An argparse type: comma-separated learner profiles (``learner_node.profiles``)."""
-    names = [name.strip() for name in text.split(",")]
-    unknown = [name for name in names if name not in PROFILES]
-    if unknown:
-        raise argparse.ArgumentTypeError(f"unknown learner profile {unknown[0]!r}: choose from {', '.join(PROFILES)}")
-    return names
+    """An argparse type: comma-separated learner profiles (``profile_name``)."""
+    return [profile_name(name) for name in text.split(",")]
 
 
 def count(minimum: int):
@@ -120,8 +125,9 @@ def check_pairs_arguments(args: argparse.Namespace) -> None:
 
 def add_profile_argument(parser: argparse.ArgumentParser, default: str | None = DEFAULT_PROFILE) -> None:
     """``--profile``: the learner profile; a default of None leaves it to the preset."""
-    parser.add_argument("--profile", default=default, choices=list(PROFILES),
-                        help="the learner profile: how policies learn and are scored (learner_node/profiles.py)"
+    parser.add_argument("--profile", default=default, type=profile_name,
+                        help=f"the learner profile: how policies learn and are scored, {' or '.join(PROFILES)}, "
+                             "with departures (base+departure...) or not (learner_node/profiles.py)"
                              + ("; default: the preset's" if default is None else ""))
 
 

@@ -110,8 +110,10 @@ def run_nodes(context, *args, **kwargs) -> list:
         default_run_dir(strategy, seed)
     params_file = preset_file(preset, params_dir())
     learner_profile = arguments["learner_profile"].strip() or None
-    if learner_profile is not None and learner_profile not in LEARNER_PROFILES:
-        raise ValueError(f"learner_profile:={learner_profile!r}: expected one of {', '.join(LEARNER_PROFILES)}")
+    # Departures (base+departure...) are the learner's to check: it refuses unknown ones by name.
+    if learner_profile is not None and learner_profile.split("+")[0] not in LEARNER_PROFILES:
+        raise ValueError(f"learner_profile:={learner_profile!r}: expected one of {', '.join(LEARNER_PROFILES)}, "
+                         "with departures (base+departure...) or not")
     pairs = pairs_value(arguments["pairs"])
     check_pairs(pairs, strategy, force=True, use_sim_time=use_sim_time)
     claim_run_dir(run_dir, run_settings(strategy, preset, seed, learner_profile=learner_profile, pairs=pairs))
@@ -153,7 +155,8 @@ def generate_launch_description() -> LaunchDescription:
         DeclareLaunchArgument("use_sim_time", default_value="false", choices=list(BOOLEANS),
                               description="sim_node and recorder_node on the sim's clock (<namespace>/clock)"),
         DeclareLaunchArgument("learner_profile", default_value="", description="the learner profile, "
-                              f"one of {', '.join(LEARNER_PROFILES)}; empty: the preset's"),
+                              f"one of {', '.join(LEARNER_PROFILES)}, with departures "
+                              "(paper+time-limit-bootstrap) or not; empty: the preset's"),
         DeclareLaunchArgument("foxglove", default_value="false", choices=list(BOOLEANS),
                               description="also start foxglove_bridge_node: the graph's topics live in Foxglove "
                               "over its WebSocket protocol (layout: share/glocal_ros/assets/foxglove/glocal.json)"),

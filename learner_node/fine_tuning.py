@@ -27,6 +27,7 @@ import copy
 from dataclasses import dataclass
 from typing import Callable, Sequence
 
+import jax
 import jax.numpy as jnp
 import numpy as np
 from flax.traverse_util import flatten_dict, unflatten_dict
@@ -56,7 +57,13 @@ def start_fine_tuning(model, tuning: FineTuning, tasks: Sequence[str]) -> None:
         elif tuning.optimizers == "unseen-as-bias":
             state = _edited(state, unseen_inputs_as_bias)
         setattr(model.policy, name, state)
-    if tuning.optimizers == "fresh-all" and hasattr(model, "ent_coef_state"):  # a learned coefficient has one
+    if not hasattr(model, "ent_coef_state"):
+        return
+    if tuning.entropy_coefficient == "initial":
+        # SBX's coefficient module sets its one parameter to its initial value, whatever the key.
+        initial = model.ent_coef.init(jax.random.PRNGKey(0))["params"]
+        model.ent_coef_state = model.ent_coef_state.replace(params=initial)
+    if tuning.optimizers == "fresh-all":
         model.ent_coef_state = _fresh(model.ent_coef_state)
 
 

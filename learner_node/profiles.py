@@ -62,11 +62,20 @@ gamma, terminal time limits) decide what a goal from a prior does in its
 first thousand steps, where the paper's and this project's learners part,
 and those it reproduces item by item. The variant is named here so that a
 comparison can say so.
+
+A profile with departures, ``base+departure[+departure...]`` (for example
+``paper+time-limit-bootstrap``), is ``base`` with each named item changed
+(``DEPARTURES``): what ``bench transfer --profiles`` ablates, one item at a
+time, to find what in the paper's regime keeps goals from learning. It trains
+and scores the base profile's policies (its shipped prior among them) and
+its own; the policies it stores carry its full name, so the base profile
+refuses them. Departures are applied in ``DEPARTURES``' order whatever order
+the name gives, and the name is written in that order.
 """
 
 from __future__ import annotations
 
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 from types import MappingProxyType
 from typing import Any, Mapping
@@ -92,6 +101,11 @@ class LearnerProfile:
     prior_store: str  # the folder of assets/ holding the profile's shipped priors
     recipes: tuple[str, ...] = field(default=())  # other fine-tuning recipes it may run with
     networks: tuple[str, ...] = field(default=())  # other networks a new model may have
+    base: str = ""  # a profile with departures: the profile it departs from ("": none)
+
+    def trains_policies_of(self, profile: str) -> bool:
+        """Whether a goal of this profile may start from a policy stored under ``profile``."""
+        return profile in (self.name, self.base)
 
     def network_of(self, name: str = "") -> Network:
         """The network ``name`` where the profile allows it ("": the profile's own)."""
@@ -144,14 +158,65 @@ PROFILES: dict[str, LearnerProfile] = {
         time_limit_terminal=True, prior_store="priors-paper"),
 }
 DEFAULT_PROFILE = "glocal_ros"
+
+
+@dataclass(frozen=True)
+class Departure:
+    """One item of a profile changed, named: what it changes to, and what the base does instead."""
+
+    profile_fields: Mapping[str, Any]  # fields of ``LearnerProfile`` replaced
+    fine_tuning_fields: Mapping[str, Any]  # fields of its ``FineTuning`` replaced
+    description: str
+
+
+#: Departures from ``paper``, each one of the items in which it follows Stable Baselines 2 (the module docstring).
+DEPARTURES: dict[str, dict[str, Departure]] = {
+    "paper": {
+        "time-limit-bootstrap": Departure(
+            MappingProxyType(dict(time_limit_terminal=False)), MappingProxyType({}),
+            "time-limit ends bootstrap from the next state (SB2: stored as terminal)"),
+        "policy-first": Departure(
+            MappingProxyType({}), MappingProxyType(dict(first_actions="policy", random_steps=None, rearm_warm=False)),
+            "a goal acts with the loaded policy from its first step (SB2: 100 uniform random actions first)"),
+        "initial-entropy": Departure(
+            MappingProxyType({}), MappingProxyType(dict(entropy_coefficient="initial")),
+            "a goal's entropy coefficient starts at a new model's 1.0 (SB2: restored from the stored policy)"),
+        "trained-mean-inputs": Departure(
+            MappingProxyType({}), MappingProxyType(dict(new_task_inputs="trained-mean")),
+            "an untrained task bit starts as the mean of the trained ones (SB2: its initial weights)"),
+    },
+}
 assert SAC_KWARGS["gradient_steps"] == -1  # one gradient step per env step, whatever N: both profiles rely on it
 
 
 def learner_profile(name: str) -> LearnerProfile:
-    """The profile called ``name``; ``ValueError`` naming the known ones otherwise."""
-    if name not in PROFILES:
-        raise ValueError(f"unknown learner profile {name!r}: choose from {', '.join(PROFILES)}")
-    return PROFILES[name]
+    """The profile called ``name``, a profile of ``PROFILES`` or one with departures (``base+departure...``);
+    ``ValueError`` naming the known ones otherwise."""
+    base_name, *wanted = name.split("+")
+    if base_name not in PROFILES:
+        raise ValueError(f"unknown learner profile {base_name!r}: choose from {', '.join(PROFILES)}")
+    base = PROFILES[base_name]
+    if not wanted:
+        return base
+    known = DEPARTURES.get(base_name, {})
+    unknown = [item for item in wanted if item not in known]
+    if unknown or len(set(wanted)) != len(wanted):
+        choices = ", ".join(known) if known else "none"
+        problem = f"unknown departure {unknown[0]!r}" if unknown else "a departure named twice"
+        raise ValueError(f"learner profile {name!r}: {problem} from {base_name!r} (departures it has: {choices})")
+    ordered = [item for item in known if item in wanted]
+    profile_fields, tuning_fields = {}, {}
+    for item in ordered:
+        profile_fields.update(known[item].profile_fields)
+        tuning_fields.update(known[item].fine_tuning_fields)
+    return replace(base, name="+".join([base_name, *ordered]), base=base_name,
+                   fine_tuning=replace(base.fine_tuning, **tuning_fields), **profile_fields)
+
+
+def profile_departures(profile: LearnerProfile) -> list[str]:
+    """What ``profile`` changes from its base, in words, one line per departure (none for a base profile)."""
+    known = DEPARTURES.get(profile.base, {})
+    return [f"{item}: {known[item].description}" for item in profile.name.split("+")[1:]]
 
 
 def glorot_initialise(model, seed: int) -> None:

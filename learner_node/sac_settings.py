@@ -190,6 +190,8 @@ FirstActions = Literal["random", "policy"]
 Optimizers = Literal["stored", "fresh", "fresh-all", "unseen-as-bias"]
 #: Where the first-layer weights of a task bit the stored model never trained on start (``FineTuning``).
 NewTaskInputs = Literal["initial", "trained-mean"]
+#: Where a learned entropy coefficient starts (``FineTuning.entropy_coefficient``).
+EntropyStart = Literal["stored", "initial"]
 
 
 @dataclass(frozen=True)
@@ -251,6 +253,11 @@ class FineTuning:
     momentum), so the model meets the new task as one it knows, and what
     differs is the object (``learner_node.fine_tuning``). The goal's check
     before its first step scores this model, not the stored one.
+
+    ``entropy_coefficient``: where a learned entropy coefficient starts.
+    ``"stored"``: the stored model's, as SB3 and Stable Baselines 2 load it.
+    ``"initial"``: a new model's (1.0 for ``ent_coef="auto"``), so a goal
+    explores as a new model does. Only for a model loaded from the store.
     """
 
     first_actions: FirstActions = "random"
@@ -262,6 +269,7 @@ class FineTuning:
     critic_warmup: int = 0
     optimizers: Optimizers = "stored"
     new_task_inputs: NewTaskInputs = "initial"
+    entropy_coefficient: EntropyStart = "stored"
 
     def __post_init__(self) -> None:
         if self.first_actions not in ("random", "policy"):
@@ -282,6 +290,8 @@ class FineTuning:
                              f"got {self.optimizers!r}")
         if self.new_task_inputs not in ("initial", "trained-mean"):
             raise ValueError(f"new_task_inputs must be 'initial' or 'trained-mean', got {self.new_task_inputs!r}")
+        if self.entropy_coefficient not in ("stored", "initial"):
+            raise ValueError(f"entropy_coefficient must be 'stored' or 'initial', got {self.entropy_coefficient!r}")
         if self.critic_warmup < 0:
             raise ValueError(f"critic_warmup must not be negative, got {self.critic_warmup}")
 

@@ -239,7 +239,7 @@ class Trainer:
         that acts on the sim's observation layout."""
         record = self.policies.record(name)
         record.check_observation_layout()
-        if record.profile != self.profile.name:
+        if not self.profile.trains_policies_of(record.profile):
             raise ValueError(f"policy {name!r} was trained under learner profile {record.profile!r}, and this "
                              f"learner runs profile {self.profile.name!r}: start from a policy of "
                              f"{self.profile.name!r} (its shipped prior is in assets/{self.profile.prior_store})")

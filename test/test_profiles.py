@@ -93,6 +93,33 @@ def test_contradictions_are_refused_naming_the_choices(make, message):
         make()
 
 
+def test_a_profile_with_departures_changes_only_the_items_it_names():
+    from dataclasses import asdict
+
+    bootstrap = learner_profile("paper+time-limit-bootstrap")
+    assert not bootstrap.time_limit_terminal and bootstrap.fine_tuning == PAPER.fine_tuning
+    both = learner_profile(" paper+trained-mean-inputs+policy-first".strip())
+    assert both.name == "paper+policy-first+trained-mean-inputs"  # DEPARTURES' order, whatever the name's
+    changed = {field for field, value in asdict(both.fine_tuning).items()
+               if value != asdict(PAPER.fine_tuning)[field]}
+    assert changed == {"first_actions", "random_steps", "rearm_warm", "new_task_inputs"}
+    assert both.time_limit_terminal and both.prior_store == PAPER.prior_store and both.base == "paper"
+    assert both.model_kwargs() == PAPER.model_kwargs() and both.glorot_init
+    assert learner_profile("paper+initial-entropy").fine_tuning.entropy_coefficient == "initial"
+
+
+@pytest.mark.parametrize("name, message", [
+    ("paper+sac-v1", "learner profile 'paper\\+sac-v1': unknown departure 'sac-v1' from 'paper' "
+                     "\\(departures it has: time-limit-bootstrap, policy-first, initial-entropy"),
+    ("paper+policy-first+policy-first", "a departure named twice"),
+    ("glocal_ros+policy-first", "departures it has: none"),
+    ("sb2+policy-first", "unknown learner profile 'sb2'"),
+])
+def test_an_unknown_departure_is_refused_naming_the_known_ones(name, message):
+    with pytest.raises(ValueError, match=message):
+        learner_profile(name)
+
+
 def test_a_time_limit_is_terminal_to_the_paper_learner_and_a_cut_still_bootstraps():
     envs = BatchedEnvs(lambda i: GraspEnv("A0", config=GraspEnvConfig(max_steps=3)), 2, "A0")
     try:
@@ -152,6 +179,38 @@ def test_a_goal_refuses_a_policy_of_another_profile_naming_both(tmp_path, paper_
     with pytest.raises(ValueError, match="policy 'prior' was trained under learner profile 'glocal_ros', and this "
                                          "learner runs profile 'paper'"):
         trainer.train(TrainGoal("A0", "prior", "out", step_budget=10))
+
+
+def test_a_profile_with_departures_trains_its_bases_policies_and_its_base_refuses_its_own(tmp_path, paper_store):
+    envs = BatchedEnvs(lambda i: GraspEnv("A0", config=SHORT), 2, "A0")
+    policies = PolicyRegistry(paper_store)
+    try:
+        departing = Trainer(envs, policies, tmp_path / "checkpoints", profile=learner_profile("paper+initial-entropy"))
+        departing.train(TrainGoal("A0", "new", "departed", step_budget=110, seed=1))
+        assert policies.record("departed").profile == "paper+initial-entropy"
+        departing.check_initial_policy("departed")
+        with pytest.raises(ValueError, match="policy 'departed' was trained under learner profile "
+                                             "'paper\\+initial-entropy', and this learner runs profile 'paper'"):
+            Trainer(envs, policies, tmp_path / "checkpoints", profile=PAPER).check_initial_policy("departed")
+    finally:
+        envs.close()
+
+
+def test_initial_entropy_starts_a_goal_at_a_new_models_coefficient_and_sb2s_way_keeps_the_stored_one(paper_model):
+    from learner_node.fine_tuning import start_fine_tuning
+
+    def coefficient(model):
+        return float(model.ent_coef_state.apply_fn({"params": model.ent_coef_state.params}))
+
+    stored = paper_model.ent_coef_state
+    try:
+        paper_model.ent_coef_state = stored.replace(params={"log_ent_coef": jax.numpy.log(0.02)})
+        start_fine_tuning(paper_model, PAPER.fine_tuning, ["A0"])
+        assert coefficient(paper_model) == pytest.approx(0.02)
+        start_fine_tuning(paper_model, learner_profile("paper+initial-entropy").fine_tuning, ["A0"])
+        assert coefficient(paper_model) == pytest.approx(1.0)
+    finally:
+        paper_model.ent_coef_state = stored
 
 
 def test_a_policy_of_an_older_observation_layout_is_refused_by_goals_and_evaluations(tmp_path, paper_store):

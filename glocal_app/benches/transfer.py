@@ -60,7 +60,7 @@ from pathlib import Path
 from typing import Callable, Sequence
 
 from glocal_ros.curriculum.learner import PAPER_THRESHOLD_FRACTION, passes_threshold
-from learner_node.profiles import DEFAULT_PROFILE, learner_profile
+from learner_node.profiles import DEFAULT_PROFILE, learner_profile, profile_departures
 from glocal_ros.paths import object_urdf
 from glocal_ros.seeds import MAX_SEED
 from glocal_ros.tasks import validate_tasks
@@ -260,7 +260,7 @@ def check_goals(recipes: Sequence[str], priors: Sequence[str], prior_store: Path
             store = next((store for store in stores if check_name(prior) in store), None)
             if store is None:
                 raise ValueError(f"no prior {prior!r} in {' or '.join(str(store.root) for store in stores)}")
-            if store.record(prior).profile != profile:
+            if not learner_profile(profile).trains_policies_of(store.record(prior).profile):
                 raise ValueError(f"prior {prior!r} of {store.root} was trained under learner profile "
                                  f"{store.record(prior).profile!r}, not {profile!r}")
     validate_tasks(list(tasks))
@@ -471,6 +471,10 @@ def transfer_bench_report(goals: Sequence[TransferGoal], command: str, settings:
             f"| {statistics.median(g.drop_points for g in mine):.0f} "
             f"| {statistics.median(g.final for g in mine):.0f} / {settings.eval_episodes} "
             f"| {statistics.median(g.wall_s for g in mine):.0f} |")
+    departures = {profile: profile_departures(learner_profile(profile)) for profile, _, _ in arms}
+    if any(departures.values()):
+        lines += ["", "What each profile with departures changes from its base (`learner_node/profiles.py`):", ""]
+        lines += [f"- `{profile}`: " + "; ".join(items) for profile, items in departures.items() if items]
     steps = [s for s, _ in goals[0].curve] if goals else []
     lines += ["", "Every goal (scores out of " f"{settings.eval_episodes} at each step):", "",
               "| profile | recipe | prior | task | seed | " + " | ".join(str(s) for s in steps)
