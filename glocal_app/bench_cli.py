@@ -49,6 +49,13 @@ def cmd_bench_sim(args: argparse.Namespace) -> int:
     return write_bench_report(report, args.out)
 
 
+def cmd_bench_physics(args: argparse.Namespace) -> int:
+    from glocal_app.benches.physics import physics_bench_report, run_physics_bench
+
+    results = run_physics_bench(args.tasks, args.steps, args.rounds)
+    return write_bench_report(physics_bench_report(results, command_line(), args.rounds), args.out)
+
+
 def cmd_bench_learner(args: argparse.Namespace) -> int:
     from glocal_app.benches.learner import learner_bench_report, run_learner_bench
 
@@ -272,6 +279,14 @@ def add_bench_commands(commands) -> None:
     bench_sim.add_argument("--rounds", type=int, default=3, help="alternating rounds; the median is reported")
     bench_sim.add_argument("--out", type=Path, default=Path("bench/results/sim.md"))
     bench_sim.set_defaults(func=cmd_bench_sim)
+    bench_physics = bench_commands.add_parser("physics", help="where one control step of the env floor goes: a "
+                                              "profile, one physics step, and what would be faster")
+    bench_physics.add_argument("--tasks", type=parse_task_list, default=["A0", "D4", "G3"],
+                               help="comma-separated tasks, one env each (default A0,D4,G3)")
+    bench_physics.add_argument("--steps", type=count(1), default=2000, help="control steps per measurement")
+    bench_physics.add_argument("--rounds", type=count(1), default=3, help="alternating rounds; medians reported")
+    bench_physics.add_argument("--out", type=Path, default=Path("bench/results/physics.md"))
+    bench_physics.set_defaults(func=cmd_bench_physics)
     bench_graph = bench_commands.add_parser("graph", help="lost answers under stress: Train goals, learner/evaluate "
                                             "and sim/step calls, 1 and 4 threads, with and without a CPU burner")
     bench_graph.add_argument("--goals", type=count(1), default=1000, help="short Train goals per row")

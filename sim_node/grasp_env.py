@@ -71,6 +71,7 @@ from glocal_ros.spaces import ACTION_DIM, OBS_DIM, PHYSICS_TIMESTEP, SUBSTEPS
 from glocal_ros.tasks import NUM_TASKS, PRIOR_TASK, task_index
 from sim_node.grasp_world import OBJECT_SPOT, TABLE_TOP_Z, GraspWorld
 from sim_node.panda_robot import FINGER_MAX_POSITION, JOINT_NAMES, yaw_of
+from sim_node.physics_client import PhysicsClient
 
 DEFAULT_OBJECTS_DIR = Path(__file__).resolve().parent.parent / "assets" / "objects"
 
@@ -205,7 +206,7 @@ class GraspEnv(gym.Env[np.ndarray, np.ndarray]):
         low, high = _observation_bounds(self.config)
         self.observation_space = spaces.Box(low, high, dtype=np.float32)
 
-        self._client: BulletClient | None = BulletClient(
+        self._client: BulletClient | None = PhysicsClient(
             connection_mode=pybullet.GUI if render_mode == "human" else pybullet.DIRECT
         )
         try:

@@ -79,6 +79,21 @@ def test_bench_learner_command_line():
         build_parser().parse_args(["bench", "learner", "--profiles", "glocal_ros,sb2"])
 
 
+def test_bench_physics_splits_a_control_step_and_measures_the_variants_side_by_side():
+    from glocal_app.benches.physics import SOLVER_ITERATIONS, physics_bench_report, run_physics_bench
+
+    (result,) = run_physics_bench(["A0"], steps=120, rounds=1, log=lambda line: None)
+    assert all(seconds >= 0 for seconds in result.parts.values()) and result.parts["physics in steps"] > 0
+    # Stepping the physics is most of a control step, even with cProfile's cost on the Python parts.
+    assert result.parts["physics in steps"] > 0.3 * sum(result.parts.values())
+    assert set(result.rates) == {"as it is", "BulletClient (bound at every call)",
+                                 *(f"{n} solver iterations" for n in SOLVER_ITERATIONS[1:])}
+    assert all(rate > 0 for rate in result.rates.values()) and all(us > 0 for us in result.substep_us.values())
+    report = physics_bench_report([result], "glocal-ros bench physics", 1)
+    assert "| physics in steps | " in report and "| 10 solver iterations | " in report
+    assert "yes: not taken" in report
+
+
 def test_bench_backends_times_both_libraries_learning_on_the_grasp_env():
     (row,) = run_backends_bench([2], steps=20, rounds=1)
     assert row.num_envs == 2 and set(row.rounds) == set(BACKENDS)

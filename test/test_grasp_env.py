@@ -166,6 +166,19 @@ def test_seeded_episodes_repeat_exactly_whatever_came_before(make_env) -> None:
     assert outcomes == expected_outcomes
 
 
+def test_the_env_client_binds_each_function_once_and_simulates_as_bullet_client_does(make_env, monkeypatch):
+    import sim_node.grasp_env as grasp_env
+    from pybullet_utils.bullet_client import BulletClient
+
+    env = make_env()
+    expected_obs, expected_outcomes = rollout(env, 7, contact_rich_actions())
+    assert "stepSimulation" in vars(env.world.client)  # bound once, found on the instance from then on
+    monkeypatch.setattr(grasp_env, "PhysicsClient", BulletClient)
+    obs, outcomes = rollout(make_env(), 7, contact_rich_actions())
+    np.testing.assert_array_equal(obs, expected_obs)
+    assert outcomes == expected_outcomes
+
+
 def test_seeds_vary_the_spawn_pose(make_env) -> None:
     env = make_env()
     positions, yaws = [], []
