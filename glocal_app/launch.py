@@ -71,6 +71,7 @@ from glocal_app.processes import (FoxgloveEndpoint, NodeProcess, check_episode_s
                                    recorded_run_settings, remote_pair_indices, run_nodes,
                                    run_parameters, run_settings, split_node_path, PAIR_NAMESPACE, PAIR_NODES,
                                    STATE_FILE, TENSORBOARD_DIR)
+from glocal_app.provenance import record_code_version
 from glocal_ros.domain import Domain, choose_domain_id, domain_id_from_environment
 from glocal_ros.foxglove_layout import RUN_LAYOUT, write_layout
 from glocal_ros.recording import message_counts
@@ -266,6 +267,7 @@ def launch(strategy: str, preset: str, seed: int, run_dir: Path, startup_timeout
     *graph, last = [path for path in run_nodes(foxglove, pairs) if split_node_path(path)[0] not in remote]
     settings = run_settings(strategy, preset, seed, step_budget, learner_profile, pairs)
     domain, node, resumed = open_run(run_dir, settings, namespace, (*graph, last), remote_pairs)
+    record_code_version(run_dir)
     logs = run_dir / "logs"
     bag = new_bag_path(run_dir)
     env = isolated_environment(domain.domain_id, logs, keep_discovery_range=domain.from_environment)

@@ -19,6 +19,7 @@ from rosbags.rosbag2 import Reader
 from conftest import REPO
 from glocal_app.benches.curriculum import KEPT_TOPICS, PAPER_LEARNED_AT_4M
 from glocal_app.processes import RUN_FILE, STATE_FILE, run_settings
+from glocal_app.provenance import CODE_FILE, code_version, describe_code, run_code_versions
 from glocal_ros.analysis.estimates import improvement_interval, iqm_interval
 from glocal_ros.analysis.report import improvement_cell, p_value_cell
 from glocal_ros.analysis.runs import welch_p_value
@@ -176,6 +177,12 @@ def test_two_strategies_through_the_graph_kept_then_restored_and_not_run_again(t
         recorded, copied = message_counts(run / "bag"), message_counts(copy / "bag")
         assert copied == {topic: n for topic, n in recorded.items() if topic in {spec.name for spec in KEPT_TOPICS}}
         assert copied[CURRICULUM_STATE.name] > 0 and len(copied) < len(recorded)
+        # The code that made it, kept with it and named in the table.
+        assert (copy / CODE_FILE).read_text() == (run / CODE_FILE).read_text()
+        (version,) = run_code_versions(run)
+        assert version["commit"] == code_version()["commit"]
+        assert milestone_row(table, "## The code of each run", f"{strategy}-seed0") == [
+            f"{strategy}-seed0", describe_code([version])]
 
     # Another machine: the kept runs, not the runs themselves. Nothing runs again, and the table is the same.
     shutil.rmtree(out)
@@ -185,5 +192,6 @@ def test_two_strategies_through_the_graph_kept_then_restored_and_not_run_again(t
     assert again.stdout.count("restored from") == again.stdout.count("finished before") == 2, again.stdout
     table = results.read_text()
     for heading, row in (("## Learned objects at each milestone", "glocal"),
-                         ("## Learned objects at each milestone", "random"), ("## GloCAL / baseline", "glocal / random")):
+                         ("## Learned objects at each milestone", "random"), ("## GloCAL / baseline", "glocal / random"),
+                         ("## The code of each run", "glocal-seed0")):
         assert milestone_row(table, heading, row) == milestone_row(first_table, heading, row)

@@ -36,7 +36,8 @@ Kept runs. A bench takes hours and OUT (tens of megabytes per run, in
 as it finishes, in KEEP (by default beside the table: ``curriculum.md`` ->
 ``curriculum-runs/``): its ``run.json``, its curriculum state and its bags
 reduced to the curriculum's and the learner's topics (``KEPT_TOPICS``, a few
-hundred kilobytes), which is all the table and the report's figures read.
+hundred kilobytes), which is all the table and the report's figures read, and
+the code that made it (``glocal_app.provenance``), which the table names.
 A bench started where OUT lacks a kept run copies it into OUT first, so it
 counts as finished and is not run again: commit KEEP, and a bench stopped on
 one machine goes on from its last finished run on another.
@@ -52,6 +53,7 @@ from pathlib import Path
 from typing import TYPE_CHECKING, Sequence
 
 from glocal_app.processes import RUN_FILE, STATE_FILE, recorded_run_settings
+from glocal_app.provenance import CODE_FILE, describe_code, run_code_versions
 from glocal_ros import topics
 from glocal_ros.tasks import NUM_TASKS
 
@@ -225,6 +227,13 @@ def curriculum_bench_report(runs: Sequence[RunData], command: str, figures_repor
                             rows)
     lines.append("")
 
+    lines += ["## The code of each run", "",
+              "The commit this package ran from at each launch of the run (`RUN_DIR/code.jsonl`, "
+              "`glocal_app.provenance`; a resumed run lists each; dirty: tracked files changed).", ""]
+    lines += markdown_table(("run", "code"), ((run.run_dir.name, describe_code(run_code_versions(run.run_dir)))
+                                              for run in runs))
+    lines.append("")
+
     if figures_report is not None:
         figures_dir = figures_report.parent
         relative = figures_dir.name
@@ -279,6 +288,8 @@ def keep_run(run_dir: Path, keep: Path) -> Path | None:
     staging = Path(tempfile.mkdtemp(prefix=f".{run_dir.name}.", dir=keep))
     try:
         shutil.copy2(run_dir / RUN_FILE, staging / RUN_FILE)
+        if (run_dir / CODE_FILE).is_file():
+            shutil.copy2(run_dir / CODE_FILE, staging / CODE_FILE)
         (staging / STATE_FILE).parent.mkdir(parents=True)
         shutil.copy2(run_dir / STATE_FILE, staging / STATE_FILE)
         for bag in find_bags(run_dir):
