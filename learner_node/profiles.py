@@ -63,6 +63,34 @@ first thousand steps, where the paper's and this project's learners part,
 and those it reproduces item by item. The variant is named here so that a
 comparison can say so.
 
+Each item, checked against SB2's source (hill-a/stable-baselines at
+259f27868f0d, 2.10.2a1; ``sac`` is ``stable_baselines/sac``, ``common`` is
+``stable_baselines/common``):
+- time limits: ``learn`` stores the env's ``done`` as it is
+  (``sac/sac.py:410,429``, ``common/base_class.py:1005``) and the target
+  is ``r + (1 - done) * gamma * V_target`` (``sac/sac.py:216-219``); nothing
+  in SAC or its buffer looks at a time limit;
+- the 100 random actions: ``learning_starts=100`` (``sac/sac.py:61``);
+  uniform random actions while ``num_timesteps < learning_starts``
+  (``:394-398``), the first gradient step right after the 100th transition
+  is stored (``:412,429,447,455-457``); ``learn(reset_num_timesteps=True)``
+  sets ``num_timesteps`` to 0 (``common/base_class.py:173-174``), so each
+  ``learn()`` call acts at random again, with the buffer kept;
+- the entropy coefficient: ``log_ent_coef`` starts at log(1.0) for
+  ``"auto"`` (``sac/sac.py:191-198``), is a trainable variable of the
+  model and so saved and restored with the weights
+  (``sac/sac.py:306-307,540-542,572-574``); Adam's moments are not
+  (``common/base_class.py:448-450``);
+- the one-hot inputs: the MLP's layers are ``tf.layers.dense`` with TF's
+  defaults, Glorot-uniform kernels and zero biases
+  (``common/tf_layers.py:55-61``, ``sac/policies.py:198-256``), [64, 64]
+  ReLU (``sac/policies.py:165,175-176``), observations not scaled
+  (``:167``): a task bit never on keeps its initial weights;
+- SAC-v1: a V network and its target (``sac/policies.py:238-242``,
+  ``sac/sac.py:205-209``), the actor's loss on Q1 alone (``:236``), one
+  training step's order actor, then critics and V, then the coefficient
+  (``:277-291``), the targets moved by Polyak after it (``:465-467``).
+
 A profile with departures, ``base+departure[+departure...]`` (for example
 ``paper+time-limit-bootstrap``), is ``base`` with each named item changed
 (``DEPARTURES``): what ``bench transfer --profiles`` ablates, one item at a

@@ -139,7 +139,13 @@ def test_an_out_holding_runs_of_other_settings_is_refused_and_kept(tmp_path):
     result = bench("--preset", "smoke", "--strategies", "glocal", "--seeds", "0", "--out", str(out),
                    "--results", str(tmp_path / "c.md"))
     assert result.returncode == 2 and f"{stranger} is a run of preset demo" in result.stderr, result.stderr
+    assert "learner profile glocal_ros (its preset's), not of preset smoke" in result.stderr, result.stderr
     assert sorted(path.relative_to(out) for path in out.rglob("*")) == before
+    # Another profile than the kept runs' is refused naming both.
+    result = bench("--preset", "demo", "--profile", "paper", "--strategies", "glocal", "--seeds", "0", "--out",
+                   str(out), "--results", str(tmp_path / "c.md"))
+    assert result.returncode == 2 and "learner profile glocal_ros (its preset's), not of preset demo" in \
+        result.stderr and "and learner profile paper:" in result.stderr, result.stderr
     # The same for the runs a bench keeps: they would be restored into its --out.
     result = bench("--preset", "smoke", "--strategies", "glocal", "--seeds", "0", "--out", str(tmp_path / "new"),
                    "--keep", str(out), "--results", str(tmp_path / "c.md"))

@@ -102,9 +102,22 @@ def check_bench(strategies: Sequence[str], seeds: Sequence[int], preset: str, ou
         if (found.get("preset"), found.get("step_budget"), found.get("learner_profile")) != wanted:
             raise ValueError(f"{run_dir} is a run of preset {found.get('preset')}, budget "
                              f"{found.get('step_budget') or 'of its preset'} and learner profile "
-                             f"{found.get('learner_profile') or 'of its preset'}, not of preset {preset}, budget "
-                             f"{step_budget or 'of its preset'} and learner profile "
-                             f"{learner_profile or 'of its preset'}: choose another --out or --keep")
+                             f"{_profile_of(found.get('preset'), found.get('learner_profile'))}, not of preset "
+                             f"{preset}, budget {step_budget or 'of its preset'} and learner profile "
+                             f"{_profile_of(preset, learner_profile)}: choose another --out or --keep")
+
+
+def _profile_of(preset: object, learner_profile: object) -> str:
+    """A run's learner profile in words: the one it was given, or its preset's as the preset says now."""
+    from glocal_app.processes import preset_parameters
+    from learner_node.profiles import DEFAULT_PROFILE
+
+    if learner_profile:
+        return str(learner_profile)
+    try:
+        return f"{preset_parameters(str(preset), 'learner_node').get('learner_profile', DEFAULT_PROFILE)} (its preset's)"
+    except (OSError, ValueError):
+        return "of its preset"
 
 
 def read_bench_runs(run_dirs: Sequence[Path]) -> list[RunData]:
