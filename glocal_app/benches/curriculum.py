@@ -115,9 +115,10 @@ def _profile_of(preset: object, learner_profile: object) -> str:
     if learner_profile:
         return str(learner_profile)
     try:
-        return f"{preset_parameters(str(preset), 'learner_node').get('learner_profile', DEFAULT_PROFILE)} (its preset's)"
+        parameters = preset_parameters(str(preset), "learner_node")
     except (OSError, ValueError):
         return "of its preset"
+    return f"{parameters.get('learner_profile', DEFAULT_PROFILE)} (its preset's)"
 
 
 def read_bench_runs(run_dirs: Sequence[Path]) -> list[RunData]:
