@@ -4,8 +4,10 @@ from __future__ import annotations
 
 import argparse
 import sys
+from dataclasses import fields
 from pathlib import Path
 
+from glocal_app.processes import RunOptions
 from glocal_app.ray_runs import DEFAULT_CPUS_PER_RUN
 from glocal_ros.curriculum.codes import STRATEGY_NAMES
 from learner_node.profiles import DEFAULT_PROFILE, PROFILES, learner_profile
@@ -76,8 +78,6 @@ def add_experiment_arguments(parser: argparse.ArgumentParser, preset: str) -> No
                         help=f"comma-separated, of {', '.join(STRATEGY_NAMES)} (default: all)")
     parser.add_argument("--seeds", type=number_list, default=[0, 1, 2], help="comma-separated (default: 0,1,2)")
     parser.add_argument("--preset", default=preset, help=f"a parameter file of assets/params (default: {preset})")
-    parser.add_argument("--budget", type=count(1), default=None, metavar="STEPS",
-                        help="training steps of every run, instead of the preset's step_budget")
     parser.add_argument("--ray", default=None, metavar="ADDRESS",
                         help="run the runs as tasks of the Ray cluster at ADDRESS (HOST:PORT of its head, e.g. "
                              "10.0.0.5:6379), or of a Ray instance started on this machine (local); the run "
@@ -95,7 +95,21 @@ def add_graph_arguments(parser: argparse.ArgumentParser) -> None:
                         help="sim_node and recorder_node on the sim's clock (/clock, /NS/clock under a "
                              "namespace), which advances by the control period per step; the learner's and the "
                              "curriculum's timeouts stay wall-clock")
+
+
+def add_run_arguments(parser: argparse.ArgumentParser) -> None:
+    """What ``launch``, ``experiment`` and ``bench curriculum`` may replace of the preset: the budget and the
+    learner profile (``processes.RunOptions``, whose fields the options are named after)."""
+    parser.add_argument("--step-budget", "--budget", type=count(1), default=None, metavar="STEPS",
+                        help="training steps of every run, instead of the preset's step_budget")
     add_profile_argument(parser, default=None)
+
+
+def run_options(args: argparse.Namespace) -> RunOptions:
+    """The ``RunOptions`` of a command's arguments: each field from the argument of its name, where the command
+    has one (``--step-budget`` -> ``step_budget``), else the field's default."""
+    return RunOptions(**{field.name: getattr(args, field.name) for field in fields(RunOptions)
+                         if hasattr(args, field.name)})
 
 
 def add_pairs_arguments(parser: argparse.ArgumentParser, remote: bool = False) -> None:
@@ -124,8 +138,8 @@ def check_pairs_arguments(args: argparse.Namespace) -> None:
 
 
 def add_profile_argument(parser: argparse.ArgumentParser, default: str | None = DEFAULT_PROFILE) -> None:
-    """``--profile``: the learner profile; a default of None leaves it to the preset."""
-    parser.add_argument("--profile", default=default, type=profile_name,
+    """``--learner-profile`` (or ``--profile``): the learner profile; a default of None leaves it to the preset."""
+    parser.add_argument("--learner-profile", "--profile", default=default, type=profile_name,
                         help=f"the learner profile: how policies learn and are scored, {' or '.join(PROFILES)}, "
                              "with departures (base+departure...) or not (learner_node/profiles.py)"
                              + ("; default: the preset's" if default is None else ""))

@@ -11,10 +11,12 @@ from glocal_app.arguments import (
     add_experiment_arguments,
     add_prior_store_argument,
     add_profile_argument,
+    add_run_arguments,
     command_line,
     count,
     number_list,
     profile_list,
+    run_options,
 )
 from glocal_app.benches import cost as cost_bench
 from glocal_app.benches.curriculum import BENCH_PRESET, DEFAULT_OUT, DEFAULT_RESULTS
@@ -69,8 +71,8 @@ def cmd_bench_learner(args: argparse.Namespace) -> int:
 def cmd_bench_eval(args: argparse.Namespace) -> int:
     from glocal_app.benches.evaluation import eval_bench_report, run_eval_bench
 
-    row = run_eval_bench(args.envs, args.eval_envs, args.episodes, args.rounds, profile=args.profile)
-    return write_bench_report(eval_bench_report(row, command_line(), args.rounds, args.profile), args.out)
+    row = run_eval_bench(args.envs, args.eval_envs, args.episodes, args.rounds, profile=args.learner_profile)
+    return write_bench_report(eval_bench_report(row, command_line(), args.rounds, args.learner_profile), args.out)
 
 
 def cmd_bench_backends(args: argparse.Namespace) -> int:
@@ -149,8 +151,8 @@ def cmd_bench_cost(args: argparse.Namespace) -> int:
     tasks = select_tasks(args.tasks)
     command = command_line()
     if args.tabulate:
-        check_cost(tasks, args.seeds, settings, args.jobs, args.profile, args.prior_store)
-        held = finished_goals(args.work_dir, settings, args.profile, args.prior_store)
+        check_cost(tasks, args.seeds, settings, args.jobs, args.learner_profile, args.prior_store)
+        held = finished_goals(args.work_dir, settings, args.learner_profile, args.prior_store)
         goals = [held[(task, seed)] for task in tasks for seed in args.seeds if (task, seed) in held]
         if not goals:
             print(f"bench cost --tabulate: no finished goal of these tasks and seeds in {args.work_dir / GOALS_FILE}",
@@ -158,7 +160,7 @@ def cmd_bench_cost(args: argparse.Namespace) -> int:
             return EXIT_FAILED
     else:
         try:
-            goals = run_cost_map(tasks, args.seeds, settings, args.work_dir, args.jobs, args.profile,
+            goals = run_cost_map(tasks, args.seeds, settings, args.work_dir, args.jobs, args.learner_profile,
                                  prior_store=args.prior_store)
         except KeyboardInterrupt:
             print(f"bench cost: interrupted; the finished goals are kept in {args.work_dir / GOALS_FILE}: the same "
@@ -166,7 +168,7 @@ def cmd_bench_cost(args: argparse.Namespace) -> int:
             return EXIT_INTERRUPTED
     figure = cost_figure(goals, settings, args.out.with_suffix(".png"))
     report = cost_report(goals, command, settings, tasks, args.seeds, args.jobs, figure, args.work_dir,
-                         tabulated=args.tabulate, profile=args.profile)
+                         tabulated=args.tabulate, profile=args.learner_profile)
     write_bench_report(report, args.out)
     print(f"figure: {figure}")
     return EXIT_OK
@@ -180,7 +182,7 @@ def cmd_bench_stones(args: argparse.Namespace) -> int:
     settings = cost_settings(args.step_budget, args.eval_interval, args.eval_episodes, args.envs, args.objects_dir)
     try:
         direct, chains = run_stones(parse_task_list(args.targets), args.seeds, settings, args.work_dir, args.jobs,
-                                    args.profile, args.prior_store)
+                                    args.learner_profile, args.prior_store)
     except KeyboardInterrupt:
         print(f"bench stones: interrupted; what finished is kept in {args.work_dir / GOALS_FILE} and "
               f"{args.work_dir / STONES_FILE}: the same command resumes", file=sys.stderr)
@@ -204,7 +206,7 @@ def cmd_bench_curriculum(args: argparse.Namespace) -> int:
     keep = args.keep or kept_runs_dir(args.results)
     code = 0
     if not args.tabulate:
-        check_bench(args.strategies, args.seeds, args.preset, args.out, args.budget, args.profile, keep)
+        check_bench(args.strategies, args.seeds, args.out, run_options(args), keep)
         bench_inputs(args.out, args.merge)  # a --merge that holds no run is refused before the first run
         from glocal_app.experiment import experiment
 
@@ -213,9 +215,9 @@ def cmd_bench_curriculum(args: argparse.Namespace) -> int:
             for run_dir in restore_kept_runs(keep, args.out):
                 print(f"{run_dir.name}: restored from {keep}")
 
-        code = experiment(args.strategies, args.seeds, args.preset, args.out, step_budget=args.budget, report=False,
-                          learner_profile=args.profile, finished=lambda run_dir: keep_run(run_dir, keep),
-                          ray_address=args.ray, ray_cpus_per_run=args.ray_cpus_per_run, prepare=keep_and_restore)
+        code = experiment(args.strategies, args.seeds, args.out, run_options(args), report=False,
+                          finished=lambda run_dir: keep_run(run_dir, keep), ray_address=args.ray,
+                          ray_cpus_per_run=args.ray_cpus_per_run, prepare=keep_and_restore)
         if code == EXIT_INTERRUPTED:  # the same command resumes
             return code
     report = tabulate_curriculum_bench(bench_inputs(args.out, args.merge, keep), command, args.results)
@@ -404,7 +406,7 @@ def add_bench_commands(commands) -> None:
     bench_curriculum.add_argument("--keep", type=Path, default=None,
                                   help="where each finished run is kept, small enough to commit, and restored from "
                                        "into --out (default: beside --results, curriculum.md -> curriculum-runs)")
-    add_profile_argument(bench_curriculum, default=None)
+    add_run_arguments(bench_curriculum)
     bench_curriculum.set_defaults(func=cmd_bench_curriculum)
 
     bench_scale = bench_commands.add_parser(

@@ -27,8 +27,10 @@ from glocal_app.arguments import (
     add_experiment_arguments,
     add_graph_arguments,
     add_pairs_arguments,
+    add_run_arguments,
     check_pairs_arguments,
     positive_float,
+    run_options,
 )
 from glocal_app.assets_cli import add_assets_commands
 from glocal_app.bag_cli import add_bag_commands
@@ -86,12 +88,11 @@ def cmd_launch(args: argparse.Namespace) -> int:
         raise ValueError("--foxglove-host needs --foxglove [PORT]")
     foxglove = None if args.foxglove is None else FoxgloveEndpoint(
         args.foxglove, *(() if args.foxglove_host is None else (args.foxglove_host,)))
-    graph = dict(namespace=args.namespace, use_sim_time=args.use_sim_time, learner_profile=args.profile,
-                 foxglove=foxglove, pairs=args.pairs, remote_pairs=args.remote_pairs,
-                 tensorboard_dir=None if args.tensorboard is None else args.tensorboard.expanduser().resolve())
-    if args.watchdog is None:
-        return launch(args.strategy, args.preset, args.seed, args.out, **graph)
-    return launch(args.strategy, args.preset, args.seed, args.out, watchdog_sec=args.watchdog, **graph)
+    how = dict(foxglove=foxglove, remote_pairs=args.remote_pairs,
+               tensorboard_dir=None if args.tensorboard is None else args.tensorboard.expanduser().resolve())
+    if args.watchdog is not None:
+        how["watchdog_sec"] = args.watchdog
+    return launch(args.strategy, args.seed, args.out, run_options(args), **how)
 
 
 def cmd_pair(args: argparse.Namespace) -> int:
@@ -112,9 +113,8 @@ def cmd_foxglove_layout(args: argparse.Namespace) -> int:
 def cmd_experiment(args: argparse.Namespace) -> int:
     from glocal_app.experiment import experiment
 
-    return experiment(args.strategies, args.seeds, args.preset, args.out, namespace=args.namespace,
-                      use_sim_time=args.use_sim_time, step_budget=args.budget, learner_profile=args.profile,
-                      ray_address=args.ray, ray_cpus_per_run=args.ray_cpus_per_run, pairs=args.pairs)
+    return experiment(args.strategies, args.seeds, args.out, run_options(args), ray_address=args.ray,
+                      ray_cpus_per_run=args.ray_cpus_per_run)
 
 
 def add_graph_commands(commands) -> None:
@@ -147,6 +147,7 @@ def add_graph_commands(commands) -> None:
     launch.add_argument("--watchdog", type=positive_float, default=None, metavar="SEC",
                         help="stop the graph (resumable) when nothing moves for SEC seconds (default: a minute)")
     add_graph_arguments(launch)
+    add_run_arguments(launch)
     launch.add_argument("--foxglove", type=int, nargs="?", const=FOXGLOVE_PORT, default=None, metavar="PORT",
                         help=f"also start foxglove_bridge_node: the graph's topics live over the Foxglove "
                              f"WebSocket protocol on ws://{FOXGLOVE_HOST}:PORT (default port {FOXGLOVE_PORT}); "
@@ -178,6 +179,7 @@ def add_graph_commands(commands) -> None:
     add_experiment_arguments(experiment, preset="smoke")
     experiment.add_argument("--out", type=Path, required=True, help="gets <strategy>-seed<N>/ per run and report/")
     add_graph_arguments(experiment)
+    add_run_arguments(experiment)
     add_pairs_arguments(experiment)
     experiment.set_defaults(func=cmd_experiment, check=check_pairs_arguments)
 

@@ -3,19 +3,17 @@
 Runs go into ``OUT/<strategy>-seed<N>/``; runs already finished are skipped,
 the others resumed. The launches run here one after another, or, with a Ray
 address, as Ray tasks on a cluster (``glocal_app.ray_runs``); either way each
-is ``RunOptions.launch_run``.
+is ``launch_run``.
 """
 
 from __future__ import annotations
 
-from dataclasses import dataclass
 from pathlib import Path
 from typing import Callable, Iterator, Sequence
 
 from glocal_app.exit_codes import EXIT_FAILED, EXIT_INTERRUPTED
 from glocal_app.launch import launch, run_finished, write_run_report
-from glocal_app.processes import (check_episode_steps, check_learner_profile, check_pairs, check_run_dir,
-                                  check_step_budget, normalize_namespace, preset_file, run_settings)
+from glocal_app.processes import RunOptions, check_run_dir
 from glocal_ros.curriculum.codes import STRATEGY_NAMES
 
 #: A run of an experiment: its strategy, seed and run directory (``experiment_runs``).
@@ -27,15 +25,13 @@ def experiment_runs(strategies: Sequence[str], seeds: Sequence[int], out: Path) 
     return [(strategy, seed, out / f"{strategy}-seed{seed}") for strategy in strategies for seed in seeds]
 
 
-def check_experiment(strategies: Sequence[str], seeds: Sequence[int], preset: str, out: Path,
-                     step_budget: int | None = None, namespace: str = "", learner_profile: str | None = None,
-                     pairs: int = 1, use_sim_time: bool = False) -> None:
+def check_experiment(strategies: Sequence[str], seeds: Sequence[int], out: Path, options: RunOptions) -> RunOptions:
     """Everything ``experiment`` refuses, checked before its first node starts; ``ValueError`` says what.
+    The options checked (``RunOptions.check``: the machine's cores are the command line's to check).
 
-    Strategies must be known and not repeat, seeds non-negative and not repeat, the preset must
-    exist, the budget cover one evaluation, every strategy train on ``pairs`` pairs (``check_pairs``;
-    the machine's cores are the command line's to check), and no run directory may hold a run of other
-    settings (another preset, budget or number of pairs): its runs would be mixed into this experiment's report.
+    Strategies must be known and not repeat, seeds non-negative and not repeat, the options hold for every
+    strategy, and no run directory may hold a run of other settings (another preset, budget or number of
+    pairs): its runs would be mixed into this experiment's report.
     """
     unknown = [s for s in strategies if s not in STRATEGY_NAMES]
     if unknown or not strategies:
@@ -44,54 +40,35 @@ def check_experiment(strategies: Sequence[str], seeds: Sequence[int], preset: st
         raise ValueError(f"strategies {list(strategies)} and seeds {list(seeds)} must each be given once")
     if min(seeds) < 0:
         raise ValueError(f"seeds must be non-negative integers, got {list(seeds)}")
-    preset_file(preset)
-    check_episode_steps(preset)
-    check_step_budget(preset, step_budget)
-    check_learner_profile(learner_profile)
-    normalize_namespace(namespace)
-    for strategy in strategies:
-        check_pairs(pairs, strategy, force=True, use_sim_time=use_sim_time)
+    options = options.check(strategies, force=True)
     for strategy, seed, run_dir in experiment_runs(strategies, seeds, out):
-        check_run_dir(run_dir, run_settings(strategy, preset, seed, step_budget, learner_profile, pairs))
+        check_run_dir(run_dir, options.settings(strategy, seed))
+    return options
 
 
-@dataclass(frozen=True)
-class RunOptions:
-    """What every run of an experiment shares: ``launch``'s arguments beside strategy, seed and run directory.
+def launch_run(strategy: str, seed: int, run_dir: Path, options: RunOptions) -> int:
+    """``launch`` one run of an experiment (or resume it) into ``run_dir``, without its own report; its exit code.
 
-    ``launch_run`` is the one way an experiment starts a run, here or in a Ray task
-    (``glocal_app.ray_runs``), so that both start the same graph with the same parameters.
+    The one way an experiment starts a run, here or in a Ray task (``glocal_app.ray_runs``), so that both
+    start the same graph with the same parameters.
     """
-
-    preset: str
-    namespace: str = ""
-    use_sim_time: bool = False
-    step_budget: int | None = None
-    learner_profile: str | None = None
-    pairs: int = 1
-
-    def launch_run(self, strategy: str, seed: int, run_dir: Path) -> int:
-        """``launch`` one run (or resume it) into ``run_dir``, without its own report; its exit code."""
-        return launch(strategy, self.preset, seed, run_dir, report=False, namespace=self.namespace,
-                      use_sim_time=self.use_sim_time, step_budget=self.step_budget,
-                      learner_profile=self.learner_profile, pairs=self.pairs)
+    return launch(strategy, seed, run_dir, options, report=False)
 
 
 def launch_here(runs: Sequence[PlannedRun], options: RunOptions) -> Iterator[tuple[Path, int]]:
     """Each run launched on this machine, one after another: its run directory and exit code, as it ends."""
     for strategy, seed, run_dir in runs:
-        yield run_dir, options.launch_run(strategy, seed, run_dir)
+        yield run_dir, launch_run(strategy, seed, run_dir, options)
 
 
-def experiment(strategies: Sequence[str], seeds: Sequence[int], preset: str, out: Path, namespace: str = "",
-               use_sim_time: bool = False, step_budget: int | None = None, report: bool = True,
-               learner_profile: str | None = None, finished: Callable[[Path], object] | None = None,
-               ray_address: str | None = None, ray_cpus_per_run: int | None = None,
-               prepare: Callable[[], object] | None = None, pairs: int = 1) -> int:
+def experiment(strategies: Sequence[str], seeds: Sequence[int], out: Path, options: RunOptions, report: bool = True,
+               finished: Callable[[Path], object] | None = None, ray_address: str | None = None,
+               ray_cpus_per_run: int | None = None, prepare: Callable[[], object] | None = None) -> int:
     """Every strategy x seed as its own run under ``out``; finished runs are kept, others (re)launched.
 
-    The runs go one after another here, each with ``launch``'s namespace, sim time and domain
-    choice, after ``check_experiment`` passed; then one report over all of them (unless ``report`` is off).
+    The runs go one after another here, each with ``options`` (``RunOptions``: preset, budget, profile,
+    pairs, namespace, clock) and ``launch``'s domain choice, after ``check_experiment`` passed; then one report
+    over all of them (unless ``report`` is off).
     ``finished(run_dir)`` is called as each launched run finishes; ``prepare()`` once everything
     was checked, before runs are told finished or not (what must not happen for refused input).
 
@@ -100,8 +77,7 @@ def experiment(strategies: Sequence[str], seeds: Sequence[int], preset: str, out
     come back into ``out`` as they end; the cluster is checked (reachable, a node large enough for
     one run) before any run starts.
     """
-    check_experiment(strategies, seeds, preset, out, step_budget, namespace, learner_profile, pairs, use_sim_time)
-    options = RunOptions(preset, namespace, use_sim_time, step_budget, learner_profile, pairs)
+    options = check_experiment(strategies, seeds, out, options)
     runs = experiment_runs(strategies, seeds, out)
     cluster = None
     if ray_address is not None:

@@ -15,7 +15,7 @@ Foxglove layout written for the run's namespace (``foxglove-layout.json``,
 
 The seed goes to sim, learner and curriculum alike, so that a run with the
 same seed repeats this one. Every node gets what ``glocal_app.processes.
-run_parameters`` plans, as ``ros2 launch glocal_ros glocal.launch.py`` gives it.
+RunOptions.parameters`` plans, as ``ros2 launch glocal_ros glocal.launch.py`` gives it.
 
 The domain is the user's ``ROS_DOMAIN_ID`` when set (a viewer already runs
 on it), else a free one of this machine (``glocal_ros.domain``); the launch
@@ -26,7 +26,7 @@ recorder_node ``use_sim_time`` (the sim's /clock), while the learner's and the
 curriculum's timeouts stay wall-clock.
 
 Pairs (``--pairs K``, K >= 2): K sims and K learners, pair i in
-``<namespace>/pair<i>``, as ``processes.run_parameters`` plans them; the
+``<namespace>/pair<i>``, as ``RunOptions.parameters`` plans them; the
 launch waits until the recorder listens to every pair's episodes, and the
 progress bar and the watchdog hear every pair (a stall names the pairs whose
 learner no longer answers). ``--remote-pairs R`` leaves the last R pairs to
@@ -64,13 +64,11 @@ from rclpy.node import Node
 from rclpy.signals import SignalHandlerOptions
 
 from glocal_app.exit_codes import EXIT_FAILED, EXIT_INTERRUPTED, EXIT_STALLED
-from glocal_app.processes import (FoxgloveEndpoint, NodeProcess, check_episode_steps, check_foxglove_endpoint,
-                                   check_learner_profile, check_pairs, check_step_budget,
-                                   check_writable_directory, claim_run_dir, isolated_environment, namespace_arguments, new_bag_path,
-                                   node_namespace, node_path, normalize_namespace, pair_namespaces, preset_file,
-                                   recorded_run_settings, remote_pair_indices, run_nodes,
-                                   run_parameters, run_settings, split_node_path, PAIR_NAMESPACE, PAIR_NODES,
-                                   STATE_FILE, TENSORBOARD_DIR)
+from glocal_app.processes import (PAIR_NAMESPACE, PAIR_NODES, STATE_FILE, TENSORBOARD_DIR, FoxgloveEndpoint,
+                                  NodeProcess, RunOptions, check_foxglove_endpoint, check_writable_directory,
+                                  claim_run_dir, isolated_environment, namespace_arguments, new_bag_path,
+                                  node_namespace, node_path, normalize_namespace, pair_namespaces, preset_file,
+                                  recorded_run_settings, remote_pair_indices, run_nodes, split_node_path)
 from glocal_app.provenance import record_code_version
 from glocal_ros.domain import Domain, choose_domain_id, domain_id_from_environment
 from glocal_ros.foxglove_layout import RUN_LAYOUT, write_layout
@@ -232,32 +230,24 @@ def check_graph(node, watchdog: Watchdog, progress: Progress, started: Sequence[
         raise GraphStalled(text)
 
 
-def launch(strategy: str, preset: str, seed: int, run_dir: Path, startup_timeout: float = 120.0,
-           report: bool = True, watchdog_sec: float = DEFAULT_WATCHDOG_SEC, namespace: str = "",
-           use_sim_time: bool = False, step_budget: int | None = None, learner_profile: str | None = None,
-           foxglove: FoxgloveEndpoint | None = None, pairs: int = 1, remote_pairs: int = 0,
-           tensorboard_dir: Path | None = None) -> int:
+def launch(strategy: str, seed: int, run_dir: Path, options: RunOptions, startup_timeout: float = 120.0,
+           report: bool = True, watchdog_sec: float = DEFAULT_WATCHDOG_SEC, foxglove: FoxgloveEndpoint | None = None,
+           remote_pairs: int = 0, tensorboard_dir: Path | None = None) -> int:
     """Run (or resume) one run in ``run_dir``; the curriculum's exit code, ``EXIT_INTERRUPTED`` on Ctrl-C or
     ``EXIT_STALLED``.
 
-    ``step_budget`` replaces the preset's training-step budget, ``learner_profile`` its learner
-    profile; ``foxglove`` starts foxglove_bridge_node there, before the other nodes; ``pairs`` sim/learner
-    pairs train GloCAL's local tasks at once, the last ``remote_pairs`` of them started on other hosts
-    (``serve_pair``; the launch waits for them on the user's ROS_DOMAIN_ID); the learners here write their
-    goals' training curves in ``tensorboard_dir`` (default ``RUN_DIR/tensorboard``; a remote pair's, in its
-    host's ``RUN_DIR/tensorboard``). Bad input (an unknown preset or
-    profile, a budget below one evaluation interval, an invalid namespace or ROS_DOMAIN_ID, another run's
-    directory, a Foxglove port that is taken or invalid, a ``tensorboard_dir`` that cannot be written, pairs that ``check_pairs`` refuses but for the
-    machine's cores, which the command line checks, remote pairs without a ROS_DOMAIN_ID set, a node of the
-    plan already running on the user's domain: ``check_names_free``) raises ``ValueError`` before anything
-    starts.
+    ``options``: the run's preset, budget, learner profile, pairs, namespace and clock (``RunOptions``).
+    ``foxglove`` starts foxglove_bridge_node there, before the other nodes; the last ``remote_pairs`` of the
+    pairs are started on other hosts (``serve_pair``; the launch waits for them on the user's ROS_DOMAIN_ID);
+    the learners here write their goals' training curves in ``tensorboard_dir`` (default
+    ``RUN_DIR/tensorboard``; a remote pair's, in its host's ``RUN_DIR/tensorboard``). Bad input (what
+    ``RunOptions.check`` refuses but for the machine's cores, which the command line checks; an invalid
+    ROS_DOMAIN_ID, another run's directory, a Foxglove port that is taken or invalid, a ``tensorboard_dir``
+    that cannot be written, remote pairs without a ROS_DOMAIN_ID set, a node of the plan already running on
+    the user's domain: ``check_names_free``) raises ``ValueError`` before anything starts.
     """
-    check_pairs(pairs, strategy, force=True, use_sim_time=use_sim_time, remote=remote_pairs)
-    params_file = preset_file(preset)
-    check_episode_steps(preset)
-    check_step_budget(preset, step_budget)
-    check_learner_profile(learner_profile)
-    namespace = normalize_namespace(namespace)
+    options = options.check([strategy], force=True, remote_pairs=remote_pairs)
+    namespace, pairs = options.namespace, options.pairs
     if foxglove is not None:
         check_foxglove_endpoint(foxglove)
     if tensorboard_dir is not None:
@@ -265,16 +255,16 @@ def launch(strategy: str, preset: str, seed: int, run_dir: Path, startup_timeout
     curves = tensorboard_dir or run_dir / TENSORBOARD_DIR
     remote = {PAIR_NAMESPACE.format(index) for index in remote_pair_indices(pairs, remote_pairs)}
     *graph, last = [path for path in run_nodes(foxglove, pairs) if split_node_path(path)[0] not in remote]
-    settings = run_settings(strategy, preset, seed, step_budget, learner_profile, pairs)
-    domain, node, resumed = open_run(run_dir, settings, namespace, (*graph, last), remote_pairs)
+    domain, node, resumed = open_run(run_dir, options.settings(strategy, seed), namespace, (*graph, last),
+                                     remote_pairs)
     record_code_version(run_dir)
     logs = run_dir / "logs"
     bag = new_bag_path(run_dir)
     env = isolated_environment(domain.domain_id, logs, keep_discovery_range=domain.from_environment)
     where = f", namespace {namespace}" if namespace else ""
     where += f", {pairs} sim/learner pairs" if pairs > 1 else ""
-    print(f"{'resuming' if resumed else 'launching'} preset {preset}, strategy {strategy}, seed {seed}{where} "
-          f"on {domain.describe()}; logs in {logs}", flush=True)
+    print(f"{'resuming' if resumed else 'launching'} preset {options.preset}, strategy {strategy}, seed "
+          f"{seed}{where} on {domain.describe()}; logs in {logs}", flush=True)
     print(f"training curves: {Path(sys.executable).parent / 'tensorboard'} --logdir {curves}",
           flush=True)
 
@@ -283,8 +273,8 @@ def launch(strategy: str, preset: str, seed: int, run_dir: Path, startup_timeout
     pairs_here = pair_namespaces(pairs)
     listen_for_progress(node, progress, watchdog, pairs_here)
     started: list[NodeProcess] = []
-    plan = run_parameters(strategy, seed, run_dir, bag, use_sim_time, step_budget, learner_profile, foxglove, pairs,
-                          curves)
+    plan = options.parameters(strategy, seed, run_dir, bag, foxglove, curves)
+    params_file = preset_file(options.preset)
 
     def start(path: str) -> NodeProcess:
         process = NodeProcess(split_node_path(path)[1], logs, plan[path], params_file, env, name=path,
@@ -396,13 +386,13 @@ def serve_pair(run_dir: Path, index: int, namespace: str = "") -> int:
     domain_id = domain_id_from_environment()
     if domain_id is None:
         raise ValueError("set ROS_DOMAIN_ID to the launch's (it prints it) and a discovery that reaches its host")
-    namespace = normalize_namespace(namespace)
-    plan = run_parameters(str(settings["strategy"]), int(settings["seed"]), run_dir, run_dir / "bag",
-                          learner_profile=settings.get("learner_profile"), pairs=pairs)
+    options = RunOptions.from_settings(settings, normalize_namespace(namespace))
+    plan = options.parameters(str(settings["strategy"]), int(settings["seed"]), run_dir, run_dir / "bag")
+    namespace = options.namespace
     pair = PAIR_NAMESPACE.format(index)
     logs = run_dir / "logs"
     env = isolated_environment(domain_id, logs, keep_discovery_range=True)
-    params_file = preset_file(str(settings["preset"]))
+    params_file = preset_file(options.preset)
     # Set, not inherited, as for the launcher (``launcher_node``): a background job inherits SIGINT ignored.
     signal.signal(signal.SIGINT, signal.default_int_handler)
     signal.signal(signal.SIGTERM, signal.default_int_handler)

@@ -29,7 +29,7 @@ def cmd_train_prior(args: argparse.Namespace) -> int:
 
     check_name(args.name)
     config = PriorConfig(max_steps=args.steps, min_steps=args.min_steps, seed=args.seed, network=args.network,
-                         profile=args.profile)
+                         profile=args.learner_profile)
     profile = learner_profile(config.profile)
     work_dir = args.work_dir or Path("build") / f"prior-{config.profile}"
     bar = tqdm(total=config.max_steps, unit="step", desc="A0 prior")
@@ -106,10 +106,10 @@ def cmd_policy_import(args: argparse.Namespace) -> int:
     if record is None:
         if not args.name:
             raise ValueError(f"no policy.json beside {args.zip} names it: name the policy with --name")
-        record = PolicyRecord(name=args.name, profile=args.profile or DEFAULT_PROFILE)
-    elif args.profile and args.profile != record.profile:
+        record = PolicyRecord(name=args.name, profile=args.learner_profile or DEFAULT_PROFILE)
+    elif args.learner_profile and args.learner_profile != record.profile:
         raise ValueError(f"{args.zip} is a policy of profile {record.profile!r} (its policy.json), not "
-                         f"{args.profile!r}")
+                         f"{args.learner_profile!r}")
     source_folder = args.zip.resolve().parent
     record.name = check_name(args.name or record.name)
     store = PolicyStore(args.store)
@@ -141,7 +141,7 @@ def _record_beside(zip_path: Path):
 def check_train_prior_arguments(args: argparse.Namespace) -> None:
     """The store defaults to the profile's shipped priors; --min-steps within --steps; an A0 in --objects-dir."""
     if args.out is None:
-        args.out = learner_profile(args.profile).shipped_priors()
+        args.out = learner_profile(args.learner_profile).shipped_priors()
     if not 0 <= args.min_steps <= args.steps:
         raise ValueError(f"--min-steps {args.min_steps} must lie between 0 and --steps {args.steps}")
     if args.objects_dir and not object_urdf(args.objects_dir, "A0").is_file():
@@ -209,7 +209,7 @@ def add_policy_commands(commands) -> None:
                                     "policies); the zip's own store converts it in place")
     policy_import.add_argument("--name", default="",
                                help="the policy's name (default: the one of the policy.json naming the zip)")
-    policy_import.add_argument("--profile", default=None, choices=list(PROFILES),
+    policy_import.add_argument("--learner-profile", "--profile", default=None, choices=list(PROFILES),
                                help="the learner profile of a zip no policy.json names (default: "
                                     f"{DEFAULT_PROFILE}); a zip of a store keeps its record's")
     policy_import.set_defaults(func=cmd_policy_import, check=check_policy_arguments)

@@ -40,7 +40,7 @@ import subprocess
 import sys
 import tempfile
 import time
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from pathlib import Path
 from typing import Mapping, Sequence
 
@@ -211,22 +211,8 @@ def new_bag_path(run_dir: Path) -> Path:
     return bag
 
 
-def run_settings(strategy: str, preset: str, seed: int, step_budget: int | None = None,
-                 learner_profile: str | None = None, pairs: int = 1) -> dict[str, object]:
-    """What ``RUN_FILE`` records of a run: its strategy, preset and seed, a budget and a learner profile that
-    override the preset's, and its pairs when more than one (a run of one pair records what it always did)."""
-    settings: dict[str, object] = {"strategy": strategy, "preset": preset, "seed": seed}
-    if step_budget is not None:
-        settings["step_budget"] = step_budget
-    if learner_profile is not None:
-        settings["learner_profile"] = learner_profile
-    if pairs != 1:
-        settings["pairs"] = pairs
-    return settings
-
-
 def recorded_run_settings(run_dir: Path) -> dict[str, object] | None:
-    """What RUN_DIR's ``RUN_FILE`` records (``run_settings``); None when it holds no run."""
+    """What RUN_DIR's ``RUN_FILE`` records (``RunOptions.settings``); None when it holds no run."""
     path = run_dir / RUN_FILE
     return json.loads(path.read_text()) if path.is_file() else None
 
@@ -242,7 +228,7 @@ def check_run_dir(run_dir: Path, settings: Mapping[str, object]) -> bool:
 
 
 def claim_run_dir(run_dir: Path, settings: Mapping[str, object]) -> bool:
-    """Record which run RUN_DIR holds (``run_settings``); True when it resumes an earlier launch.
+    """Record which run RUN_DIR holds (``RunOptions.settings``); True when it resumes an earlier launch.
 
     Another run's directory is refused (``check_run_dir``).
     """
@@ -309,41 +295,97 @@ def check_writable_directory(folder: Path, option: str) -> None:
         raise ValueError(f"{option} {folder}: not a directory this user can write to ({error.strerror})") from None
 
 
-def run_parameters(strategy: str, seed: int, run_dir: Path, bag: Path, use_sim_time: bool = False,
-                   step_budget: int | None = None, learner_profile: str | None = None,
-                   foxglove: FoxgloveEndpoint | None = None, pairs: int = 1,
-                   tensorboard_dir: Path | None = None) -> dict[str, dict[str, object]]:
-    """What each node of a run gets on top of its preset, keyed by ``node_path``, in ``run_nodes`` order.
+@dataclass(frozen=True)
+class RunOptions:
+    """What a run is beside its strategy and seed, and what every run of one experiment shares.
 
-    ``use_sim_time`` is given to the nodes of ``SIM_TIME_NODES`` only, and only when on: a node
-    without it keeps whatever its preset says. ``step_budget`` (training steps of the whole run)
-    and ``learner_profile`` replace the preset's when given; ``foxglove`` adds the bridge, serving there.
-    Every learner writes its goals' training curves in ``tensorboard_dir`` (default ``RUN_DIR/tensorboard``).
-    ``pairs`` above one: every pair's sim and learner get the same seed and the one policy directory;
-    the recorder and the curriculum get the pairs' namespaces (relative: they resolve under the run's),
-    and the curriculum ``parallel_locals``.
+    Each way to start runs builds one and hands it on whole: the command line
+    (``glocal_app.arguments.run_options``), the launch file (from its
+    arguments), ``glocal-ros pair`` (``from_settings``: a run directory's
+    ``RUN_FILE``). From it come the checks before anything starts (``check``),
+    what ``RUN_FILE`` records (``settings``) and what each node gets (the plan,
+    ``parameters``), for ``launch``, experiments, Ray tasks and the benches
+    alike. An option has one name throughout: the field, the command line's
+    ``--step-budget``, ``--learner-profile``, ... (dashes for underscores), the
+    launch file's ``step_budget:=``, ... and the node parameter it sets.
     """
-    budget = {"step_budget": step_budget} if step_budget is not None else {}
-    sim_time = {"use_sim_time": True} if use_sim_time else {}
-    profile = {"learner_profile": learner_profile} if learner_profile is not None else {}
-    bridge = {FOXGLOVE_NODE: {"port": foxglove.port, "address": foxglove.host, **sim_time}} if foxglove else {}
-    namespaces = pair_namespaces(pairs)
-    listed = ",".join(namespaces)
-    pair_nodes: dict[str, dict[str, object]] = {}
-    for namespace in namespaces:
-        pair_nodes[node_path(namespace, "sim_node")] = {"seed": seed, **sim_time}
-        pair_nodes[node_path(namespace, "learner_node")] = {"seed": seed, "policy_dir": str(run_dir / "policies"),
-                                                           "tensorboard_dir": str(tensorboard_dir or
-                                                                                  run_dir / TENSORBOARD_DIR),
-                                                           **profile}
-    return {
-        **bridge,
-        "recorder_node": {"output": str(bag), **sim_time, **({"pair_namespaces": listed} if pairs > 1 else {})},
-        **pair_nodes,
-        "curriculum_node": {"strategy": strategy, "seed": seed, "state_dir": str(run_dir / STATE_FILE.parent),
-                            **budget,
-                            **({"learner_namespaces": listed, "parallel_locals": True} if pairs > 1 else {})},
-    }
+
+    preset: str
+    #: Training steps of the whole run, instead of the preset's (the curriculum's ``step_budget``).
+    step_budget: int | None = None
+    #: Instead of the preset's (every learner's ``learner_profile``).
+    learner_profile: str | None = None
+    pairs: int = 1
+    namespace: str = ""
+    use_sim_time: bool = False
+
+    def check(self, strategies: Sequence[str] = (), force: bool = True, remote_pairs: int = 0) -> RunOptions:
+        """These options with the namespace normalised; ``ValueError`` before anything starts for an unknown
+        preset or profile, a preset whose T differs between sim and curriculum, a budget below one evaluation, an
+        invalid namespace, or pairs that ``check_pairs`` refuses with any of ``strategies`` (``force``: more
+        pairs than cores, the command line's to check)."""
+        preset_file(self.preset)
+        check_episode_steps(self.preset)
+        check_step_budget(self.preset, self.step_budget)
+        check_learner_profile(self.learner_profile)
+        for strategy in strategies or (None,):
+            check_pairs(self.pairs, strategy, force, self.use_sim_time, remote=remote_pairs)
+        return replace(self, namespace=normalize_namespace(self.namespace))
+
+    def settings(self, strategy: str, seed: int) -> dict[str, object]:
+        """What ``RUN_FILE`` records of the run: its strategy, preset and seed, the budget and learner profile
+        where they replace the preset's, and its pairs when more than one (a run of one pair records what it
+        always did). Namespace and clock are how a run is watched, not which run it is."""
+        settings: dict[str, object] = {"strategy": strategy, "preset": self.preset, "seed": seed}
+        if self.step_budget is not None:
+            settings["step_budget"] = self.step_budget
+        if self.learner_profile is not None:
+            settings["learner_profile"] = self.learner_profile
+        if self.pairs != 1:
+            settings["pairs"] = self.pairs
+        return settings
+
+    @classmethod
+    def from_settings(cls, settings: Mapping[str, object], namespace: str = "",
+                      use_sim_time: bool = False) -> RunOptions:
+        """The options of a run as ``settings`` (its ``RUN_FILE``) records them."""
+        budget, profile = settings.get("step_budget"), settings.get("learner_profile")
+        return cls(str(settings["preset"]), None if budget is None else int(budget),
+                   None if profile is None else str(profile), int(settings.get("pairs", 1)), namespace, use_sim_time)
+
+    def parameters(self, strategy: str, seed: int, run_dir: Path, bag: Path, foxglove: FoxgloveEndpoint | None = None,
+                   tensorboard_dir: Path | None = None) -> dict[str, dict[str, object]]:
+        """What each node of the run gets on top of its preset, keyed by ``node_path``, in ``run_nodes`` order.
+
+        ``use_sim_time`` is given to the nodes of ``SIM_TIME_NODES`` only, and only when on: a node
+        without it keeps whatever its preset says. ``step_budget`` and ``learner_profile`` replace the
+        preset's when given; ``foxglove`` adds the bridge, serving there. Every learner writes its goals'
+        training curves in ``tensorboard_dir`` (default ``RUN_DIR/tensorboard``). ``pairs`` above one: every
+        pair's sim and learner get the same seed and the one policy directory; the recorder and the
+        curriculum get the pairs' namespaces (relative: they resolve under the run's), and the curriculum
+        ``parallel_locals``.
+        """
+        budget = {"step_budget": self.step_budget} if self.step_budget is not None else {}
+        sim_time = {"use_sim_time": True} if self.use_sim_time else {}
+        profile = {"learner_profile": self.learner_profile} if self.learner_profile is not None else {}
+        bridge = {FOXGLOVE_NODE: {"port": foxglove.port, "address": foxglove.host, **sim_time}} if foxglove else {}
+        namespaces = pair_namespaces(self.pairs)
+        listed = ",".join(namespaces)
+        curves = str(tensorboard_dir or run_dir / TENSORBOARD_DIR)
+        pair_nodes: dict[str, dict[str, object]] = {}
+        for namespace in namespaces:
+            pair_nodes[node_path(namespace, "sim_node")] = {"seed": seed, **sim_time}
+            pair_nodes[node_path(namespace, "learner_node")] = {
+                "seed": seed, "policy_dir": str(run_dir / "policies"), "tensorboard_dir": curves, **profile}
+        several = self.pairs > 1
+        parallel = {"learner_namespaces": listed, "parallel_locals": True} if several else {}
+        return {
+            **bridge,
+            "recorder_node": {"output": str(bag), **sim_time, **({"pair_namespaces": listed} if several else {})},
+            **pair_nodes,
+            "curriculum_node": {"strategy": strategy, "seed": seed, "state_dir": str(run_dir / STATE_FILE.parent),
+                                **budget, **parallel},
+        }
 
 
 def check_pairs(pairs: int, strategy: str | None = None, force: bool = False, use_sim_time: bool = False,

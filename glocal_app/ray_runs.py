@@ -5,7 +5,7 @@ The contract:
 - Each (strategy, seed) run that OUT does not hold finished is one Ray task
   that reserves ``cpus_per_run`` CPUs (``DEFAULT_CPUS_PER_RUN``: the learner's
   SAC thread and the sim; the recorder and the curriculum mostly wait) and
-  starts its own graph with ``RunOptions.launch_run``, the function a local
+  starts its own graph with ``experiment.launch_run``, the function a local
   experiment calls, so both start the same nodes with the same parameters.
 - Its ROS domain is unique on its node: the task drops any ``ROS_DOMAIN_ID``
   the worker inherited, so ``launch`` reserves a free one there
@@ -56,7 +56,8 @@ from pathlib import Path
 from typing import TYPE_CHECKING, Iterator, Sequence
 
 if TYPE_CHECKING:
-    from glocal_app.experiment import PlannedRun, RunOptions
+    from glocal_app.experiment import PlannedRun
+    from glocal_app.processes import RunOptions
 
 #: CPUs a run reserves unless told (``--ray-cpus-per-run``).
 DEFAULT_CPUS_PER_RUN = 2
@@ -144,6 +145,8 @@ def run_task(strategy: str, seed: int, name: str, archive: bytes | None, options
     The launch's output goes to ``logs/launch-<time>.log`` in the run directory, which comes back
     with it; an exception is written there too and counts as exit code 1.
     """
+    from glocal_app.experiment import launch_run
+
     started = time.monotonic()
     work = Path(tempfile.mkdtemp(prefix="glocal-ros-ray-"))
     try:
@@ -160,7 +163,7 @@ def run_task(strategy: str, seed: int, name: str, archive: bytes | None, options
         blocked = signal.pthread_sigmask(signal.SIG_UNBLOCK, {signal.SIGINT})
         with open(run_dir / log, "w") as stream, redirect_stdout(stream), redirect_stderr(stream):
             try:
-                code = options.launch_run(strategy, seed, run_dir)
+                code = launch_run(strategy, seed, run_dir, options)
             except Exception:  # noqa: BLE001 - the run's log says what, the driver that it failed
                 traceback.print_exc()
                 code = 1

@@ -10,8 +10,10 @@ share/glocal_ros/assets/params: smoke, demo, paper; default demo), ``seed``
 (default 0), ``out`` (the run directory; default
 ``$ROS_HOME/glocal_ros/runs/<strategy>-seed<seed>``), ``namespace`` (default
 none; relative, so an including launch file's PushRosNamespace prefixes it)
-``use_sim_time`` (default false), ``learner_profile`` (default: the
-preset's; glocal_ros or paper, ``learner_node/profiles.py``) and ``foxglove``
+``use_sim_time`` (default false), ``step_budget`` (training steps of the
+run; default: the preset's), ``learner_profile`` (default: the preset's;
+glocal_ros or paper, with departures or not, ``learner_node/profiles.py``)
+and ``foxglove``
 (default false; true also starts foxglove_bridge_node, first, serving the
 graph's topics on ws://``foxglove_host``:``foxglove_port``, default
 127.0.0.1:8765: another host is an explicit choice) and ``pairs`` (default 1:
@@ -22,7 +24,8 @@ and with a sequential strategy, not checked against the machine's cores).
 
 It starts recorder_node, sim_node, learner_node and curriculum_node with the
 parameters ``glocal-ros launch`` gives them, from the one plan of both
-(``glocal_app.processes.run_parameters``): the preset's file, the seed, and
+(``glocal_app.processes.RunOptions``, built here from the arguments of the
+same names): the preset's file, the seed, and
 the run directory's ``bag/`` (``bag.1/``, ... on later launches),
 ``policies/`` and ``curriculum/``; ``use_sim_time`` goes to sim_node and
 recorder_node only (the learner's and the curriculum's timeouts are
@@ -58,9 +61,9 @@ from launch.events import Shutdown
 from launch_ros.actions import Node
 
 from glocal_app.processes import (FOXGLOVE_HOST, FOXGLOVE_PORT, FoxgloveEndpoint, check_foxglove_endpoint,
-                                  check_pairs, claim_run_dir, default_run_dir, namespace_remappings, new_bag_path,
-                                  node_namespace, normalize_namespace, preset_file, run_nodes as planned_nodes,
-                                  run_parameters, run_settings, split_node_path)
+                                  RunOptions, check_pairs, claim_run_dir, default_run_dir, namespace_remappings,
+                                  new_bag_path, node_namespace, normalize_namespace, preset_file,
+                                  run_nodes as planned_nodes, split_node_path)
 
 PACKAGE = "glocal_ros"
 #: As glocal_ros.curriculum.codes.STRATEGY_NAMES (not imported: see the docstring; a test compares them).
@@ -77,6 +80,14 @@ def params_dir() -> Path:
 def seed_value(text: str) -> int:
     if not text.strip().isdigit():
         raise ValueError(f"seed:={text!r}: expected a non-negative integer")
+    return int(text)
+
+
+def step_budget_value(text: str) -> int | None:
+    if not text.strip():
+        return None
+    if not text.strip().isdigit() or int(text) < 1:
+        raise ValueError(f"step_budget:={text!r}: expected training steps, 1 or more (empty: the preset's)")
     return int(text)
 
 
@@ -114,11 +125,11 @@ def run_nodes(context, *args, **kwargs) -> list:
     if learner_profile is not None and learner_profile.split("+")[0] not in LEARNER_PROFILES:
         raise ValueError(f"learner_profile:={learner_profile!r}: expected one of {', '.join(LEARNER_PROFILES)}, "
                          "with departures (base+departure...) or not")
-    pairs = pairs_value(arguments["pairs"])
-    check_pairs(pairs, strategy, force=True, use_sim_time=use_sim_time)
-    claim_run_dir(run_dir, run_settings(strategy, preset, seed, learner_profile=learner_profile, pairs=pairs))
-    plan = run_parameters(strategy, seed, run_dir, new_bag_path(run_dir), use_sim_time,
-                          learner_profile=learner_profile, foxglove=foxglove, pairs=pairs)
+    options = RunOptions(preset, step_budget_value(arguments["step_budget"]), learner_profile,
+                         pairs_value(arguments["pairs"]), namespace, use_sim_time)
+    check_pairs(options.pairs, strategy, force=True, use_sim_time=use_sim_time)
+    claim_run_dir(run_dir, options.settings(strategy, seed))
+    plan = options.parameters(strategy, seed, run_dir, new_bag_path(run_dir), foxglove)
 
     def node(path: str) -> Node:
         where = node_namespace(namespace, path)
@@ -130,7 +141,7 @@ def run_nodes(context, *args, **kwargs) -> list:
             remappings=namespace_remappings(where),
         )
 
-    nodes = {path: node(path) for path in planned_nodes(foxglove, pairs)}
+    nodes = {path: node(path) for path in planned_nodes(foxglove, options.pairs)}
     # The run is over when the curriculum node ends: stop the rest, as glocal-ros launch does.
     end_of_run = RegisterEventHandler(OnProcessExit(
         target_action=nodes["curriculum_node"],
@@ -154,6 +165,8 @@ def generate_launch_description() -> LaunchDescription:
                               "(several graphs on one domain); topics are then /robot1/..."),
         DeclareLaunchArgument("use_sim_time", default_value="false", choices=list(BOOLEANS),
                               description="sim_node and recorder_node on the sim's clock (<namespace>/clock)"),
+        DeclareLaunchArgument("step_budget", default_value="", description="training steps of the run; empty: "
+                              "the preset's"),
         DeclareLaunchArgument("learner_profile", default_value="", description="the learner profile, "
                               f"one of {', '.join(LEARNER_PROFILES)}, with departures "
                               "(paper+time-limit-bootstrap) or not; empty: the preset's"),

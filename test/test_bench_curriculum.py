@@ -18,7 +18,7 @@ from rosbags.rosbag2 import Reader
 
 from conftest import REPO
 from glocal_app.benches.curriculum import KEPT_TOPICS, PAPER_LEARNED_AT_4M
-from glocal_app.processes import RUN_FILE, STATE_FILE, run_settings
+from glocal_app.processes import RUN_FILE, STATE_FILE, RunOptions
 from glocal_app.provenance import CODE_FILE, code_version, describe_code, run_code_versions
 from glocal_ros.analysis.estimates import improvement_interval, iqm_interval
 from glocal_ros.analysis.report import improvement_cell, p_value_cell
@@ -44,7 +44,7 @@ def random_run(seed: int) -> SyntheticRun:
 
 def record(out: Path, run: SyntheticRun, preset: str = "bench") -> Path:
     run_dir = write_run(out / f"{run.strategy}-seed{run.seed}", run)
-    (run_dir / RUN_FILE).write_text(json.dumps(run_settings(run.strategy, preset, run.seed)))
+    (run_dir / RUN_FILE).write_text(json.dumps(RunOptions(preset).settings(run.strategy, run.seed)))
     return run_dir
 
 

@@ -17,6 +17,7 @@ import pytest
 from rosbags.highlevel import AnyReader
 
 from conftest import REPO, smoke_tasks, wait_until
+from glocal_app.processes import RunOptions
 from glocal_ros.domain import choose_domain_id, domain_id_from_environment, hold_domain_id, reserve_domain_id
 from glocal_ros.recording import episode_sequence, graph_typestore
 
@@ -234,15 +235,18 @@ def test_namespace_sim_time_and_profile_reach_launch_and_experiment(monkeypatch,
     monkeypatch.setattr(glocal_app.launch, "launch", lambda *args, **kwargs: calls.append((args, kwargs)) or 0)
     monkeypatch.setattr(glocal_app.experiment, "experiment", lambda *args, **kwargs: calls.append((args, kwargs)) or 0)
     assert main(["launch", "--preset", "smoke", "--out", str(tmp_path), "--namespace", "robot1",
-                 "--use-sim-time", "--profile", "paper"]) == 0
+                 "--use-sim-time", "--profile", "paper", "--step-budget", "400"]) == 0
     assert main(["experiment", "--strategies", "random", "--seeds", "0", "--out", str(tmp_path)]) == 0
-    assert calls[0][1] == {"namespace": "robot1", "use_sim_time": True, "learner_profile": "paper", "foxglove": None,
-                           "pairs": 1, "remote_pairs": 0, "tensorboard_dir": None}
-    assert calls[1][1] == {"namespace": "", "use_sim_time": False, "step_budget": None, "learner_profile": None,
-                           "ray_address": None, "ray_cpus_per_run": 2, "pairs": 1}
+    # One RunOptions, each field from the option of its name (--profile is --learner-profile for short).
+    assert calls[0][0] == ("glocal", 0, tmp_path, RunOptions("smoke", 400, "paper", 1, "robot1", True))
+    assert calls[0][1] == {"foxglove": None, "remote_pairs": 0, "tensorboard_dir": None}
+    assert calls[1][0] == (["random"], [0], tmp_path, RunOptions("smoke"))
+    assert calls[1][1] == {"ray_address": None, "ray_cpus_per_run": 2}
     assert main(["experiment", "--strategies", "random", "--seeds", "0", "--out", str(tmp_path), "--ray",
-                 "10.0.0.5:6379", "--ray-cpus-per-run", "3"]) == 0
+                 "10.0.0.5:6379", "--ray-cpus-per-run", "3", "--budget", "500", "--learner-profile",
+                 "paper+policy-first", "--pairs", "1"]) == 0
     assert (calls[2][1]["ray_address"], calls[2][1]["ray_cpus_per_run"]) == ("10.0.0.5:6379", 3)
+    assert calls[2][0][3] == RunOptions("smoke", 500, "paper+policy-first")
 
 
 def test_a_run_of_two_pairs_one_started_as_on_another_host_records_every_pair_and_call(tmp_path):

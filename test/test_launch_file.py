@@ -26,12 +26,12 @@ import yaml
 import launch_standins
 from conftest import REPO
 from glocal_app.nodes import NODES
-from glocal_app.processes import FOXGLOVE_NODE, RUN_NODES, FoxgloveEndpoint, run_parameters
+from glocal_app.processes import FOXGLOVE_NODE, RUN_NODES, FoxgloveEndpoint, RunOptions
 from glocal_ros.curriculum.codes import STRATEGY_NAMES
 
 LAUNCH_FILE = REPO / "launch" / "glocal.launch.py"
-ARGUMENTS = {"strategy", "preset", "seed", "out", "namespace", "use_sim_time", "learner_profile", "foxglove",
-             "foxglove_port", "foxglove_host", "pairs"}
+ARGUMENTS = {"strategy", "preset", "seed", "out", "namespace", "use_sim_time", "step_budget", "learner_profile",
+             "foxglove", "foxglove_port", "foxglove_host", "pairs"}
 #: What the launch file may import: ROS's launch API, the ament index and the stdlib-only plan.
 ALLOWED_IMPORTS = {"__future__", "pathlib", "launch", "launch.actions", "launch.event_handlers", "launch.events",
                    "launch_ros.actions", "ament_index_python.packages", "glocal_app.processes"}
@@ -142,7 +142,7 @@ def test_the_issue_example_starts_the_graph_as_glocal_ros_launch_does(launch_fil
         "curriculum_node": {"strategy": "glocal", "seed": 0, "state_dir": str(out / "curriculum")},
     }
     # What glocal-ros launch gives the same run (glocal_app.launch builds its processes from it).
-    assert plan == run_parameters("glocal", 0, out, out / "bag", use_sim_time=True)
+    assert plan == RunOptions("smoke", use_sim_time=True).parameters("glocal", 0, out, out / "bag")
     assert json.loads((out / "run.json").read_text()) == {"strategy": "glocal", "preset": "smoke", "seed": 0}
 
     (handler,) = others
@@ -185,11 +185,25 @@ def test_a_later_launch_records_a_new_bag_and_sim_time_reaches_only_sim_and_reco
     ({"preset": "nope"}, "is not one of"),
     ({"strategy": "nope"}, "is not one of"),
     ({"use_sim_time": "yes"}, "is not one of"),
+    ({"step_budget": "0"}, "expected training steps"),
+    ({"step_budget": "many"}, "expected training steps"),
 ])
 def test_bad_arguments_are_refused_before_anything_starts(launch_file, tmp_path, arguments, error):
     with pytest.raises((ValueError, RuntimeError), match=error):
         evaluate(launch_file, out=str(tmp_path / "run"), **arguments)
     assert not (tmp_path / "run").exists()
+
+
+def test_a_step_budget_and_a_profile_reach_the_plan_and_the_run_file_as_glocal_ros_launch_gives_them(
+        launch_file, tmp_path):
+    out = tmp_path / "run"
+    nodes, _ = evaluate(launch_file, preset="smoke", out=str(out), step_budget="300",
+                        learner_profile="paper+time-limit-bootstrap")
+    options = RunOptions("smoke", step_budget=300, learner_profile="paper+time-limit-bootstrap")
+    assert {name: parameters(node)[1] for name, node in nodes.items()} == \
+        options.parameters("glocal", 0, out, out / "bag")
+    assert parameters(nodes["curriculum_node"])[1]["step_budget"] == 300
+    assert json.loads((out / "run.json").read_text()) == options.settings("glocal", 0)
 
 
 def test_a_directory_of_another_run_is_refused(launch_file, tmp_path):
@@ -218,8 +232,8 @@ def test_foxglove_starts_the_bridge_first_with_the_plans_endpoint(launch_file, t
     assert bridge.namespace == "robot1" and bridge.remappings == [("/clock", "clock")]
     plan = {name: parameters(node)[1] for name, node in nodes.items()}
     assert plan[FOXGLOVE_NODE] == {"port": port, "address": "127.0.0.1", "use_sim_time": True}
-    assert plan == run_parameters("glocal", 0, out, out / "bag", use_sim_time=True,
-                                  foxglove=FoxgloveEndpoint(port))
+    assert plan == RunOptions("smoke", namespace="/robot1", use_sim_time=True).parameters(
+        "glocal", 0, out, out / "bag", FoxgloveEndpoint(port))
     assert {name for name, node in nodes.items() if "use_sim_time" in parameters(node)[1]} == \
         {"sim_node", "recorder_node", FOXGLOVE_NODE}
 
@@ -250,7 +264,7 @@ def test_pairs_start_every_pair_in_its_namespace_as_glocal_ros_launch_plans_them
                      "pair1/learner_node", "curriculum_node"]
     assert all(node.remappings == [("/clock", "clock")] for node in nodes), "each hears its own namespace's clock"
     plan = {path: parameters(node)[1] for path, node in zip(paths, nodes)}
-    assert plan == run_parameters("glocal", 0, out, out / "bag", pairs=2)
+    assert plan == RunOptions("smoke", pairs=2, namespace="/robot1").parameters("glocal", 0, out, out / "bag")
     assert plan["curriculum_node"]["learner_namespaces"] == "pair0,pair1"
     assert plan["curriculum_node"]["parallel_locals"] is True
     assert plan["recorder_node"]["pair_namespaces"] == "pair0,pair1"

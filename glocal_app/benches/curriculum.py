@@ -52,7 +52,7 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import TYPE_CHECKING, Sequence
 
-from glocal_app.processes import RUN_FILE, STATE_FILE, recorded_run_settings
+from glocal_app.processes import RUN_FILE, STATE_FILE, RunOptions, recorded_run_settings
 from glocal_app.provenance import CODE_FILE, describe_code, run_code_versions
 from glocal_ros import topics
 from glocal_ros.tasks import NUM_TASKS
@@ -89,22 +89,23 @@ def bench_run_dirs(out: Path) -> list[Path]:
     return sorted(path.parent for path in out.glob(f"*/{RUN_FILE}") if not path.parent.name.startswith("."))
 
 
-def check_bench(strategies: Sequence[str], seeds: Sequence[int], preset: str, out: Path,
-                step_budget: int | None, learner_profile: str | None = None, keep: Path | None = None) -> None:
+def check_bench(strategies: Sequence[str], seeds: Sequence[int], out: Path, options: RunOptions,
+                keep: Path | None = None) -> None:
     """``ValueError`` for what ``experiment`` refuses, and for any run under OUT or ``keep`` of another preset,
     budget or learner profile."""
     from glocal_app.experiment import check_experiment
 
-    check_experiment(strategies, seeds, preset, out, step_budget, learner_profile=learner_profile)
+    check_experiment(strategies, seeds, out, options)
+    wanted = (options.preset, options.step_budget, options.learner_profile)
     for run_dir in bench_run_dirs(out) + (bench_run_dirs(keep) if keep is not None else []):
         found = recorded_run_settings(run_dir) or {}
-        wanted = (preset, step_budget, learner_profile)
         if (found.get("preset"), found.get("step_budget"), found.get("learner_profile")) != wanted:
             raise ValueError(f"{run_dir} is a run of preset {found.get('preset')}, budget "
                              f"{found.get('step_budget') or 'of its preset'} and learner profile "
                              f"{_profile_of(found.get('preset'), found.get('learner_profile'))}, not of preset "
-                             f"{preset}, budget {step_budget or 'of its preset'} and learner profile "
-                             f"{_profile_of(preset, learner_profile)}: choose another --out or --keep")
+                             f"{options.preset}, budget {options.step_budget or 'of its preset'} and learner profile "
+                             f"{_profile_of(options.preset, options.learner_profile)}: choose another --out or "
+                             "--keep")
 
 
 def _profile_of(preset: object, learner_profile: object) -> str:
