@@ -137,7 +137,7 @@ def add_graph_commands(commands) -> None:
     launch = commands.add_parser("launch", help="run the whole graph as processes on the ROS_DOMAIN_ID you set, "
                                  "else on a free one; the same command resumes an interrupted run")
     launch.add_argument("--strategy", default="glocal", choices=STRATEGY_NAMES)
-    launch.add_argument("--preset", default="demo", help="a parameter file of assets/params: smoke, demo, bench, paper (default: demo)")
+    launch.add_argument("--preset", default="demo", help="a parameter file of assets/params: smoke, demo, bench, paper, paper-bench (default: demo)")
     launch.add_argument("--seed", type=int, default=0)
     launch.add_argument("--out", type=Path, required=True,
                         help="run directory: gets bag/, policies/, curriculum/, tensorboard/, logs/ and report/")

@@ -214,12 +214,15 @@ def test_launch_refuses_a_bad_domain_id_or_namespace_before_anything_starts(tmp_
     assert not (tmp_path / "run").exists(), "nothing was claimed or started"
 
 
-def test_the_presets_give_the_sim_and_the_curriculum_one_episode_length(tmp_path):
-    from glocal_app.processes import check_episode_steps
-    from glocal_app.processes import preset_file
+def test_every_preset_gives_the_sim_and_the_curriculum_one_episode_length_and_names_a_known_profile(tmp_path):
+    from glocal_app.processes import check_episode_steps, preset_file, preset_parameters
+    from learner_node.profiles import learner_profile
 
-    for preset in ("smoke", "demo", "bench", "paper"):
+    presets = sorted(path.stem for path in preset_file("smoke").parent.glob("*.yaml"))
+    assert {"smoke", "demo", "bench", "paper", "paper-bench"} <= set(presets)
+    for preset in presets:
         check_episode_steps(preset)
+        learner_profile(str(preset_parameters(preset, "learner_node")["learner_profile"]))  # a known one
     text = preset_file("smoke").read_text().replace("max_steps: 20", "max_steps: 30")
     (tmp_path / "mine.yaml").write_text(text)
     with pytest.raises(ValueError, match="preset mine: sim_node max_steps 30 and curriculum_node max_episode_steps 20"):
