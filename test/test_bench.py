@@ -531,7 +531,7 @@ def test_bench_cost_command_line_defaults():
     assert args.func is cmd_bench_cost
     assert (args.tasks, args.seeds, args.step_budget, args.eval_interval, args.eval_episodes, args.envs) == \
         ("per-row:3", [0, 1], 15_000, 1_000, 100, 4)
-    assert (args.work_dir, args.out, args.tabulate, args.profile) == \
+    assert (args.work_dir, args.out, args.tabulate, args.learner_profile) == \
         (Path("runs/bench-cost"), Path("bench/results/cost.md"), False, "glocal_ros")
 
 
