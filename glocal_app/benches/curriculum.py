@@ -52,7 +52,7 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import TYPE_CHECKING, Sequence
 
-from glocal_app.processes import RUN_FILE, STATE_FILE, RunOptions, recorded_run_settings
+from glocal_app.processes import RUN_FILE, STATE_FILE, RunOptions, preset_parameters, recorded_run_settings
 from glocal_app.provenance import CODE_FILE, describe_code, run_code_versions
 from glocal_ros import topics
 from glocal_ros.tasks import NUM_TASKS
@@ -110,7 +110,6 @@ def check_bench(strategies: Sequence[str], seeds: Sequence[int], out: Path, opti
 
 def _profile_of(preset: object, learner_profile: object) -> str:
     """A run's learner profile in words: the one it was given, or its preset's as the preset says now."""
-    from glocal_app.processes import preset_parameters
     from learner_node.profiles import DEFAULT_PROFILE
 
     if learner_profile:
