@@ -20,15 +20,15 @@ node's namespace, as every ROS name does (``pair1`` of a node in ``/robot1``
 is ``/robot1/pair1``; ``/`` is the root), so that a launch file's
 ``PushRosNamespace`` moves the curriculum and its pairs together. With ``parallel_locals`` GloCAL sends
 its local tasks to whichever is free (``glocal_ros.curriculum.glocal``); the
-journal is then keyed by call and says which learner (its index in
-``learner_namespaces``) answered each; a call whose learner left the graph
-and was not back within ``learner_away_sec`` goes to the next free one (a
-Train goal resumes there from its checkpoint in the shared policy store),
-and that learner gets calls again once it is back. Such a run starts (and
-resumes) once every learner runs no goal: the goals a killed curriculum
-node left running end first, and the same goals sent again get their
-outcome instead of running a second time on another learner. Without
-``parallel_locals`` the run is sequential and uses the first learner only.
+journal says which learner (its index in ``learner_namespaces``) answered
+each call; a call whose learner left the graph and was not back within
+``learner_away_sec`` goes to the next free one (a Train goal resumes there
+from its checkpoint in the shared policy store), and that learner gets
+calls again once it is back. Without ``parallel_locals`` the run is
+sequential and uses the first learner only. A run starts (and resumes) once
+its learners run no goal: the goals a killed curriculum node left running
+end first, and the same goals sent again get their outcome instead of
+running a second time.
 """
 
 from __future__ import annotations
@@ -45,7 +45,7 @@ from rclpy.duration import Duration
 from rclpy.node import Node
 
 from glocal_ros.curriculum.codes import BASELINE_TASKS
-from glocal_ros.curriculum.journal import CallJournal, JournaledLearner
+from glocal_ros.curriculum.journal import CallJournal
 from glocal_ros.files import atomic_write
 from glocal_ros.paths import ros_home
 from glocal_ros.sim_contract import DEFAULT_EPISODE_STEPS
@@ -92,13 +92,7 @@ class CurriculumNode(Node):
         self.learners = [RosLearner(self, self.learner_timeout, namespace=namespace,
                                     away_sec=away if pooled else None)
                          for namespace in self.learner_namespaces]
-        self.learner = self.learners[0]
-        journal_path = self.state_dir / "journal.jsonl"
-        if self.config.parallel_locals:
-            self.journal = CallJournal(journal_path, self.config.journal_settings())
-        else:
-            self.journal = JournaledLearner(self.learner, journal_path, self.config.journal_settings(),
-                                            seed=self.config.seed)
+        self.journal = CallJournal(self.state_dir / "journal.jsonl", self.config.journal_settings())
         if self.journal.replaying:
             self.get_logger().info(f"resuming {self.config.run_id} from {self.journal.path}")
         self.exit_code = 0
@@ -146,16 +140,13 @@ class CurriculumNode(Node):
 
     def run(self) -> None:
         try:
-            for learner in self.learners:
-                if self.config.parallel_locals:
-                    learner.wait_until_ready()
-                else:
-                    learner.wait_for_learner()
-            if self.config.parallel_locals:
-                run = Run(self.config, self.learner, self, learners=self.learners, journal=self.journal,
-                          resend_on=(ServiceCallError,))
-            else:
-                run = Run(self.config, self.journal, self)
+            pool = self.learners if self.config.parallel_locals else self.learners[:1]
+            for learner in pool:
+                learner.wait_until_ready()
+            # With parallel_locals a call whose learner left goes to the next free one; without, the loss
+            # ends the run (the same command resumes it).
+            run = Run(self.config, pool[0], self, learners=pool, journal=self.journal,
+                      resend_on=(ServiceCallError,) if self.config.parallel_locals else ())
             run_strategy(run, self.max_episode_steps)
             self.get_logger().info(
                 f"{self.config.run_id} finished: {len(run.state.learned_tasks)}/{len(self.config.tasks)} tasks "

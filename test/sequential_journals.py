@@ -1,19 +1,24 @@
-"""Journals of sequential runs against the learner double, as the code before parallel locals wrote them.
+"""Journals of sequential runs against the learner double, and the references the code before the one
+scheduler wrote.
 
-``test_curriculum.test_sequential_journals_are_unchanged`` runs these again and compares them byte for
-byte with the references in ``test/data/sequential-journals`` (written by ``python test/sequential_journals.py``
-from the sequential code, before the run became a scheduler): ``parallel_locals: false`` must keep every
-call, seed and answer of today's runs.
+``test_curriculum.test_sequential_journals_are_unchanged`` runs these again and compares them, line by line
+and less each line's ``key`` and ``learner`` (which the old code did not write), with the references in
+``test/data/sequential-journals`` (written by ``python test/sequential_journals.py`` from the sequential code
+before parallel locals, kept since): ``parallel_locals: false`` must keep every call, seed and answer of the
+runs written before. ``python test/sequential_journals.py`` writes today's journals to a temporary
+directory and says whether each is its reference's.
 """
 
 from __future__ import annotations
 
+import json
 import sys
+import tempfile
 from pathlib import Path
 
 sys.path.insert(0, str(Path(__file__).parent))
 
-from glocal_ros.curriculum.journal import JournaledLearner  # noqa: E402
+from glocal_ros.curriculum.journal import CallJournal  # noqa: E402
 from glocal_ros.curriculum.run import Run, RunConfig  # noqa: E402
 from glocal_ros.curriculum.strategies import run_strategy  # noqa: E402
 from learner_double import SimulatedLearner  # noqa: E402
@@ -26,16 +31,22 @@ SETTINGS = dict(step_budget=60_000, task_step_budget=8_000, eval_interval=2_000,
 STRATEGIES = ("glocal", "glocal_random_cluster", "glocal_no_global", "random")
 
 
-def write_journal(strategy: str, path: Path) -> None:
+def write_journal(strategy: str, path: Path, learner: SimulatedLearner | None = None) -> None:
     config = RunConfig(strategy, TASKS, **SETTINGS)
-    journal = JournaledLearner(SimulatedLearner(seed=1, lockstep_envs=2), path, config.journal_settings(), seed=config.seed)
-    run_strategy(Run(config, journal))
+    journal = CallJournal(path, config.journal_settings())
+    run_strategy(Run(config, learner or SimulatedLearner(seed=1, lockstep_envs=2), journal=journal))
+
+
+def without_keys(path: Path) -> list[dict]:
+    """The journal's lines, less what the references lack: each answer's key and learner."""
+    lines = [json.loads(line) for line in path.read_text().splitlines()]
+    return [{name: value for name, value in line.items() if name not in ("key", "learner")} for line in lines]
 
 
 if __name__ == "__main__":
-    REFERENCES.mkdir(parents=True, exist_ok=True)
+    today = Path(tempfile.mkdtemp(prefix="sequential-journals-"))
     for name in STRATEGIES:
-        target = REFERENCES / f"{name}.jsonl"
-        target.unlink(missing_ok=True)
+        target = today / f"{name}.jsonl"
         write_journal(name, target)
-        print(target, len(target.read_text().splitlines()), "lines")
+        same = without_keys(target) == without_keys(REFERENCES / f"{name}.jsonl")
+        print(target, len(target.read_text().splitlines()), "lines,", "the reference's" if same else "NOT the reference's")

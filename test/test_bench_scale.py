@@ -13,7 +13,7 @@ from glocal_ros.analysis.scale import (
     CallModel, RecordedRun, VirtualCalls, VirtualClock, entry_cost, read_recorded_run, schedule, simulate,
     with_pairs,
 )
-from glocal_ros.curriculum.journal import JournaledLearner
+from glocal_ros.curriculum.journal import CallJournal
 from glocal_ros.curriculum.run import Run
 from glocal_ros.curriculum.strategies import run_strategy
 from learner_double import SimulatedLearner
@@ -26,9 +26,8 @@ def recorded(tmp_path, strategy="glocal"):
     """A sequential run of the double, journaled; every goal's checks as the bag would count them: none."""
     run_config = config(strategy, **SHORT)
     path = tmp_path / "journal.jsonl"
-    journal = JournaledLearner(SimulatedLearner(seed=1, lockstep_envs=2), path, run_config.journal_settings(),
-                               seed=run_config.seed)
-    run_strategy(Run(run_config, journal))
+    journal = CallJournal(path, run_config.journal_settings())
+    run_strategy(Run(run_config, SimulatedLearner(seed=1, lockstep_envs=2), journal=journal))
     lines = [json.loads(line) for line in path.read_text().splitlines()]
     return RecordedRun(tmp_path, run_config, lines[0]["config"], lines[1:], 1, [0, 1], {})
 

@@ -6,7 +6,7 @@ import math
 import pytest
 
 from glocal_ros.clustering import cluster_tasks, split_global_local
-from glocal_ros.curriculum.journal import JournaledLearner, JournalMismatch
+from glocal_ros.curriculum.journal import CallJournal, JournalMismatch
 from glocal_ros.curriculum.codes import (
     ROLE_CLUSTER, ROLE_GLOBAL, ROLE_SAMPLED, STATUS_EVALUATING, STATUS_FINISHED,
 )
@@ -346,11 +346,11 @@ def test_a_killed_run_resumes_from_its_journal(tmp_path, strategy):
     # The learner outlives the curriculum node (its policies are on disk): one double throughout.
     learner = SimulatedLearner(seed=1)
     with pytest.raises(Killed):
-        run_strategy(Run(cfg, JournaledLearner(DiesAfter(learner, 7), journal, {"c": 1})))
+        run_strategy(Run(cfg, DiesAfter(learner, 7), journal=CallJournal(journal, {"c": 1})))
     assert len(journal.read_text().splitlines()) == 1 + 7
 
-    journaled = JournaledLearner(learner, journal, {"c": 1})
-    resumed = Run(cfg, journaled)
+    journaled = CallJournal(journal, {"c": 1})
+    resumed = Run(cfg, learner, journal=journaled)
     run_strategy(resumed)
     assert journaled.replayed == 7
     assert resumed.state == uninterrupted.state
@@ -359,7 +359,7 @@ def test_a_killed_run_resumes_from_its_journal(tmp_path, strategy):
 
 def test_the_journal_says_what_each_call_cost(tmp_path):
     journal = tmp_path / "journal.jsonl"
-    the_run = Run(config("random", **SHORT), JournaledLearner(SimulatedLearner(seed=1), journal, {}))
+    the_run = Run(config("random", **SHORT), SimulatedLearner(seed=1), journal=CallJournal(journal, {}))
     run_strategy(the_run)
     entries = [json.loads(line) for line in journal.read_text().splitlines()[1:]]
     assert sum(e["cost"].get("training_steps", 0) for e in entries) == the_run.state.total_steps > 0
@@ -368,18 +368,17 @@ def test_the_journal_says_what_each_call_cost(tmp_path):
 
 def test_a_journal_of_other_settings_is_refused(tmp_path):
     journal = tmp_path / "journal.jsonl"
-    JournaledLearner(SimulatedLearner(), journal, {"strategy": "glocal"})
+    CallJournal(journal, {"strategy": "glocal"})
     with pytest.raises(JournalMismatch, match="other settings"):
-        JournaledLearner(SimulatedLearner(), journal, {"strategy": "random"})
+        CallJournal(journal, {"strategy": "random"})
 
 
 def test_a_journal_line_cut_by_a_kill_is_dropped(tmp_path):
     journal = tmp_path / "journal.jsonl"
-    learner = JournaledLearner(SimulatedLearner(), journal, {})
-    learner.evaluate("prior", ["A0"], 10)
+    Run(config(), SimulatedLearner(), journal=CallJournal(journal, {})).evaluate("prior", ["A0"])
     with open(journal, "a") as stream:
-        stream.write('{"call": "train", "argu')
-    resumed = JournaledLearner(SimulatedLearner(), journal, {})
+        stream.write('{"key": "call1", "learner": 0, "call": "train", "argu')
+    resumed = CallJournal(journal, {})
     assert resumed.replaying and len(journal.read_text().splitlines()) == 2
 
 
@@ -414,8 +413,35 @@ def test_every_named_strategy_exists():
 def test_sequential_journals_are_unchanged(tmp_path, strategy):
     """A sequential run (``parallel_locals: false``) asks, seeds and journals exactly what it did before the
     run became a scheduler of outstanding calls: byte for byte (see ``sequential_journals``)."""
-    from sequential_journals import REFERENCES, write_journal
+    from sequential_journals import REFERENCES, without_keys, write_journal
 
     written = tmp_path / "journal.jsonl"
     write_journal(strategy, written)
-    assert written.read_bytes() == (REFERENCES / f"{strategy}.jsonl").read_bytes()
+    assert without_keys(written) == without_keys(REFERENCES / f"{strategy}.jsonl")
+    entries = [json.loads(line) for line in written.read_text().splitlines()[1:]]
+    assert all(entry["learner"] == 0 for entry in entries)
+    assert len({entry["key"] for entry in entries}) == len(entries), "every call has a key of its own"
+
+
+@pytest.mark.parametrize("strategy", ["glocal", "random"])
+def test_a_journal_written_before_calls_had_keys_resumes(tmp_path, strategy):
+    """A reference journal (no keys: the code before the one scheduler), cut in the middle, and the
+    double's store as that run left it at the cut: the run resumes from the journal, asks nothing twice
+    and ends as the old run did."""
+    from sequential_journals import REFERENCES, SETTINGS, TASKS, without_keys
+
+    reference = REFERENCES / f"{strategy}.jsonl"
+    lines = reference.read_text().splitlines(keepends=True)
+    cut = len(lines) // 2
+    journal = tmp_path / "journal.jsonl"
+    journal.write_text("".join(lines[:cut]))
+    cfg = RunConfig(strategy, TASKS, **SETTINGS)
+    learner = SimulatedLearner(seed=1, lockstep_envs=2)  # its store outlives the curriculum node
+    with pytest.raises(Killed):
+        run_strategy(Run(cfg, DiesAfter(learner, cut - 1)))
+    asked_before = len(learner.calls)
+    resumed = CallJournal(journal, cfg.journal_settings())
+    run_strategy(Run(cfg, learner, journal=resumed))
+    assert resumed.replayed == cut - 1
+    assert len(learner.calls) - asked_before == len(lines) - cut, "no journaled call asked again"
+    assert without_keys(journal) == without_keys(reference)

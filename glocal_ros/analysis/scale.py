@@ -9,7 +9,7 @@ Read top to bottom: read a run directory, time its calls, fit the model, then si
    as ``bench curriculum`` counts it (node start-up left out). A resumed run (``bag.1/``...) is
    refused: its calls span the kill.
 2. ``time_calls`` (sequential runs only): the real strategy is run again through ``Run`` on the
-   journal's answers (``JournaledLearner`` over a copy), and each call is placed between the states
+   journal's answers (its ``CallJournal`` over a copy), and each call is placed between the states
    the node published around it. The run is cut at every state published right after an answer:
    a segment holds the calls answered in it (two at most in practice: an evaluation and the copies
    the baselines make at once) and runs from the previous cut; so the segments add up to the
@@ -23,9 +23,9 @@ Read top to bottom: read a run directory, time its calls, fit the model, then si
    size: the goal's start, loading and storing policies, the clustering.
 4. ``simulate``: the strategy of a run config, driven by ``RecordedLearner`` (a double that answers
    from a recorded run and says how many seconds each answer took, by the model) on a virtual
-   clock: sequential calls move the clock by their seconds (``ClockedLearner``); outstanding calls
-   go through ``Run``'s own scheduler to K learners, and ``VirtualCalls`` (its ``CallRunner``) ends
-   each one its seconds after it started, earliest first. Nothing sleeps. The strategy's time
+   clock: every call goes through ``Run``'s own scheduler to K learners (one for a sequential run),
+   and ``VirtualCalls`` (its ``CallRunner``) ends each one its seconds after it started, earliest
+   first. Nothing sleeps. The strategy's time
    between calls counts as nothing here (it is inside the calls' segments in 2.).
    The double's rules, for calls the recorded run made and for those it did not:
    - a Train goal on task T: the n-th goal on T gets the recorded run's n-th goal on T (the last
@@ -55,7 +55,7 @@ from typing import Any, Sequence
 import numpy as np
 
 from glocal_ros.analysis.runs import _messages, find_bags
-from glocal_ros.curriculum.journal import JournaledLearner, train_result
+from glocal_ros.curriculum.journal import CallJournal, train_result
 from glocal_ros.curriculum.learner import TrainGoal, TrainResult
 from glocal_ros.curriculum.run import Run, RunConfig, RunState
 from glocal_ros.curriculum.strategies import run_strategy
@@ -77,11 +77,6 @@ class RecordedRun:
     pairs: int  # learners that answered: 1 for a sequential journal
     state_stamps_ns: list[int]  # every CurriculumState's header stamp, in order
     goal_eval_episodes: dict[str, int]  # a Train goal's output policy -> episodes of its checks
-
-    @property
-    def keyed(self) -> bool:
-        """A journal of outstanding calls (``parallel_locals``), keyed by call."""
-        return bool(self.entries) and "key" in self.entries[0]
 
     @property
     def wall_seconds(self) -> float:
@@ -177,31 +172,34 @@ class _NoLearner:
     train = copy = evaluate
 
 
+class _MarkingJournal(CallJournal):
+    """A recorded run's journal that notes, for each answer, the states published before it was taken."""
+
+    def __init__(self, path: Path, settings: dict, counting: _Counting):
+        super().__init__(path, settings)
+        self.counting = counting
+        self.answered_before: list[int] = []
+
+    def next_entry(self) -> dict:
+        self.answered_before.append(self.counting.states)
+        return super().next_entry()
+
+
 def time_calls(run: RecordedRun, max_episode_steps: int) -> list[Segment]:
     """The segments of a sequential run (see the module doc, 2.), adding up to its wall-clock."""
-    if run.keyed:
+    if run.config.parallel_locals:
         raise ValueError(f"{run.run_dir}: a run with parallel_locals; its calls overlap, so time a sequential "
                          "run (K = 1) and --validate this one")
     counting = _Counting()
-    answered_before: list[int] = []  # per call: states published before its answer was taken
-
     with tempfile.TemporaryDirectory() as scratch:
         copy = Path(scratch) / "journal.jsonl"
         shutil.copyfile(run.run_dir / JOURNAL_FILE, copy)
-        journal = JournaledLearner(_NoLearner(), copy, run.settings, seed=run.config.seed)
-
-        class Marking:  # the journal's answers, noting when each call returned
-            def __getattr__(self, name):
-                def call(*args, **kwargs):
-                    answer = getattr(journal, name)(*args, **kwargs)
-                    answered_before.append(counting.states)
-                    return answer
-                return call
-
+        journal = _MarkingJournal(copy, run.settings, counting)
         try:
-            run_strategy(Run(run.config, Marking(), counting), max_episode_steps)
+            run_strategy(Run(run.config, _NoLearner(), counting, journal=journal), max_episode_steps)
         except _JournalSpent:
             raise ValueError(f"{run.run_dir}: the journal ends before the run does (an interrupted run?)") from None
+    answered_before = journal.answered_before
     if len(answered_before) != len(run.entries) or counting.states != len(run.state_stamps_ns):
         raise ValueError(f"{run.run_dir}: its journal replays {len(answered_before)} calls and {counting.states} "
                          f"states, its bag holds {len(run.entries)} calls and {len(run.state_stamps_ns)} states: "
@@ -314,20 +312,6 @@ class VirtualClock:
     now: float = 0.0
 
 
-class ClockedLearner:
-    """A sequential run's learner: each blocking call moves the clock by what the double says it took."""
-
-    def __init__(self, learner: RecordedLearner, clock: VirtualClock):
-        self.learner, self.clock = learner, clock
-
-    def __getattr__(self, name):
-        def call(*args, **kwargs):
-            answer = getattr(self.learner, name)(*args, **kwargs)
-            self.clock.now += self.learner.last_seconds
-            return answer
-        return call
-
-
 class VirtualCalls:
     """``Run``'s ``CallRunner`` on a virtual clock: a call is answered when it starts and ends its
     ``last_seconds`` later; ``next_done`` moves the clock to the earliest end (the first started on a tie)."""
@@ -365,7 +349,7 @@ def simulate(config: RunConfig, answers: RecordedRun, model: CallModel, pairs: i
     if pairs < 1:
         raise ValueError(f"pairs must be at least 1, got {pairs}")
     clock, double = VirtualClock(), RecordedLearner(answers, model)
-    run = Run(config, ClockedLearner(double, clock), learners=[double] * pairs, calls=VirtualCalls(clock))
+    run = Run(config, double, learners=[double] * pairs, calls=VirtualCalls(clock))
     run_strategy(run, max_episode_steps)
     return Prediction(pairs, clock.now, len(run.state.learned_tasks), run.state.total_steps,
                       run.state.evaluation_episodes)

@@ -130,7 +130,7 @@ def _save_passing_tasks(run: Run, sampler: TaskSampler, policy: str) -> None:
     for task, score in run.evaluate(policy, remaining).items():
         if passes_threshold(score, run.config.threshold):
             copy = run.config.policy_name(task)
-            run.learner.copy(policy, copy)
+            run.copy(policy, copy)
             run.mark_learned(task, copy)
             if run.config.baseline_tasks == "unlearned" and not run.over:
                 sampler.retire(task)

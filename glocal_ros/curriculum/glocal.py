@@ -34,10 +34,13 @@ Choices the paper leaves open, made here:
 
 Parallel locals (``parallel_locals: true``, GloCAL and
 ``glocal_random_cluster``; ``glocal_no_global``'s sweep is one policy
-through the cluster, so it stays sequential, as do the baselines). The local
-tasks of iteration m need only pi_G,m, so they go out as soon as it exists,
-each to the next free learner (``Run.start_train``), while the run goes on
-to iteration m+1. The orderings that change, against the sequential run:
+through the cluster, so each of its tasks waits for the one before, as do
+the baselines). The local tasks of iteration m need only pi_G,m, so they go
+out as soon as it exists, each to the next free learner, while the run goes
+on to iteration m+1. One loop runs both: without ``parallel_locals`` every
+call is waited for before the next is asked (the K = 1 case of the run's
+scheduler, ``glocal_ros.curriculum.run``). The orderings that change, against
+the sequential run:
 - Every local task of iteration m starts from pi_G,m: there is no chain
   (pi_L,m,i does not start from pi_L,m,i-1).
 - Iteration m+1 starts while locals of m are in flight: it evaluates
@@ -54,7 +57,7 @@ to iteration m+1. The orderings that change, against the sequential run:
   one that finds no steps left after its evaluation trains nothing and goes on.
 - When every remaining task is in flight, the run waits for an answer.
 - Seeds come from the run seed and the call's key (``m3/local/B1``), not the
-  call's place, and the journal is keyed by call.
+  call's place.
 With one learner, the calls are queued first in, first out: the locals of m
 then run before the evaluation of m+1, whose pool still leaves them out.
 """
@@ -73,39 +76,6 @@ def run_glocal(run: Run, ablation: str = "") -> None:
     """GloCAL; ``ablation`` is "", "no_global" or "random_cluster"."""
     if ablation not in ("", "no_global", "random_cluster"):
         raise ValueError(f"unknown GloCAL ablation {ablation!r}")
-    if run.config.parallel_locals and ablation != "no_global":
-        run_glocal_parallel_locals(run, ablation == "random_cluster")
-        return
-    config = run.config
-    rng = np.random.default_rng(config.seed)
-    current = config.initial_policy
-    for iteration in range(1, config.max_iter + 1):
-        if run.over:
-            break
-        run.begin_iteration(iteration)
-        remaining = list(run.state.remaining_tasks)
-        scores = run.evaluate(current, remaining)
-        clustering = cluster_tasks(scores, config.k_min, config.k_max, seed=config.seed + iteration)
-        chosen = int(rng.integers(len(clustering.clusters))) if ablation == "random_cluster" else 0
-        cluster = clustering.clusters[chosen]
-
-        if ablation == "no_global":
-            sweep = [cluster.tasks[i] for i in rng.permutation(len(cluster.tasks))]
-            run.show_clustering(clustering, chosen, "", sweep)
-            current = _train_chain(run, ROLE_CLUSTER, current, sweep, f"C{iteration}", every_policy=True)
-        else:
-            global_task, local_tasks = split_global_local(cluster)
-            run.show_clustering(clustering, chosen, global_task, local_tasks)
-            global_policy = config.policy_name(f"G{iteration}")
-            _train_task(run, ROLE_GLOBAL, global_task, current, global_policy)
-            _train_chain(run, ROLE_LOCAL, global_policy, local_tasks, f"L{iteration}", every_policy=False)
-            current = global_policy
-        run.set_current_policy(current)
-    run.finish()
-
-
-def run_glocal_parallel_locals(run: Run, random_cluster: bool) -> None:
-    """GloCAL with each iteration's local tasks on free learners, overlapping the next iteration."""
     config = run.config
     rng = np.random.default_rng(config.seed)
     current = config.initial_policy
@@ -118,65 +88,60 @@ def run_glocal_parallel_locals(run: Run, random_cluster: bool) -> None:
         iteration += 1
         run.begin_iteration(iteration)
         key = f"m{iteration}"
-        scores: dict[str, float] = {}
-        run.start_evaluate(current, idle, f"{key}/evaluate", scores.update)
-        run.wait_for(f"{key}/evaluate")
+        scores = run.evaluate(current, idle, f"{key}/evaluate")
         clustering = cluster_tasks(scores, config.k_min, config.k_max, seed=config.seed + iteration)
-        chosen = int(rng.integers(len(clustering.clusters))) if random_cluster else 0
-        global_task, local_tasks = split_global_local(clustering.clusters[chosen])
-        run.show_clustering(clustering, chosen, global_task, local_tasks)
-        if run.steps_left == 0:
-            continue
-        global_policy = config.policy_name(f"G{iteration}")
-        _start_task(run, ROLE_GLOBAL, global_task, current, global_policy, f"{key}/global/{global_task}")
-        run.wait_for(f"{key}/global/{global_task}")
-        for index, task in enumerate(local_tasks):
+        chosen = int(rng.integers(len(clustering.clusters))) if ablation == "random_cluster" else 0
+        cluster = clustering.clusters[chosen]
+
+        if ablation == "no_global":
+            sweep = [cluster.tasks[i] for i in rng.permutation(len(cluster.tasks))]
+            run.show_clustering(clustering, chosen, "", sweep)
+            current = _train_tasks(run, ROLE_CLUSTER, current, sweep, f"C{iteration}", f"{key}/cluster",
+                                   hand_on="every")
+        else:
+            global_task, local_tasks = split_global_local(cluster)
+            run.show_clustering(clustering, chosen, global_task, local_tasks)
             if run.steps_left == 0:
-                break
-            output = config.policy_name(f"L{iteration}_{index}")
-            _start_task(run, ROLE_LOCAL, task, global_policy, output, f"{key}/local/{task}")
-        current = global_policy
+                continue
+            global_policy = config.policy_name(f"G{iteration}")
+            run.wait_for(_start_task(run, ROLE_GLOBAL, global_task, current, global_policy,
+                                     f"{key}/global/{global_task}"))
+            _train_tasks(run, ROLE_LOCAL, global_policy, local_tasks, f"L{iteration}", f"{key}/local",
+                         hand_on="none" if config.parallel_locals else "learned")
+            current = global_policy
         run.set_current_policy(current)
     run.wait_all()
     run.finish()
 
 
-def _start_task(run: Run, role: int, task: str, initial: str, output: str, key: str) -> None:
+def _train_tasks(run: Run, role: int, first: str, tasks: list[str], names: str, key: str, hand_on: str) -> str:
+    """Train ``tasks`` in turn, the first from policy ``first``; their outputs are ``names``_0, _1, ...
+    and their calls ``key``/<task>. Each next task starts from the policy handed on: every task's output
+    (``hand_on="every"``: the sweep of one policy), the output of the last task learned (``"learned"``:
+    the local chain), or none (``"none"``: every task from ``first``, all queued at once for the free
+    learners, not waited for). Returns the last policy handed on."""
+    policy = first
+    for index, task in enumerate(tasks):
+        if run.steps_left == 0:
+            break
+        output = run.config.policy_name(f"{names}_{index}")
+        call = _start_task(run, role, task, policy, output, f"{key}/{task}")
+        if hand_on == "none":
+            continue
+        run.wait_for(call)
+        if hand_on == "every" or run.is_learned(task):
+            policy = output
+    return policy
+
+
+def _start_task(run: Run, role: int, task: str, initial: str, output: str, key: str) -> str:
     """Queue ``task`` until learned or out of its budget; marked learned when its answer says so."""
     def done(result: TrainResult) -> None:
         if result.learned:
             run.mark_learned(task, output)
 
     config = run.config
-    run.start_train(role, TrainGoal(
+    return run.start_train(role, TrainGoal(
         task=task, initial_policy=initial, output_policy=output, step_budget=config.task_step_budget,
         eval_interval=config.eval_interval, stop_when_learned=True,
     ), key, done)
-
-
-def _train_chain(run: Run, role: int, first: str, tasks: list[str], names: str, every_policy: bool) -> str:
-    """Train ``tasks`` in turn, the first from policy ``first``, each next one from the policy handed on:
-    every task's output (``every_policy``: the sweep of one policy) or, in the local chain, the output of
-    the last task learned. Outputs are ``names``_0, _1, ...; returns the last policy handed on."""
-    policy = first
-    for index, task in enumerate(tasks):
-        if run.over:
-            break
-        output = run.config.policy_name(f"{names}_{index}")
-        if _train_task(run, role, task, policy, output) or every_policy:
-            policy = output
-    return policy
-
-
-def _train_task(run: Run, role: int, task: str, initial: str, output: str) -> bool:
-    """Train ``task`` until learned or out of its budget; True when learned."""
-    if run.over:
-        return False
-    config = run.config
-    result = run.train(role, TrainGoal(
-        task=task, initial_policy=initial, output_policy=output, step_budget=config.task_step_budget,
-        eval_interval=config.eval_interval, stop_when_learned=True,
-    ))
-    if result.learned:
-        run.mark_learned(task, output)
-    return result.learned

@@ -18,20 +18,32 @@ Choices:
   every milestone up to the budget: a run that learned everything early
   stands in the milestone table beside those that used the whole budget.
 
-Outstanding calls (``parallel_locals``): besides the blocking ``train`` and
-``evaluate`` that sequential strategies call (through the one ``learner``,
-journaled by position: ``glocal_ros.curriculum.journal.JournaledLearner``),
-a run schedules calls over a pool of K learners. ``start_train`` and
-``start_evaluate`` queue a call under a key that names it (e.g.
-``m3/local/B1``), with a seed derived from the run seed and that key; the
-queue goes first in, first out to the free learners (lowest index first);
-``wait_for``, ``wait_any`` and ``wait_all`` take answers in the order they
-come and hand each to its call's ``when_done`` in the strategy's thread, so
-every decision is made between two answers. A ``CallJournal`` records each
-answer with its key and the learner that gave it, in the order they came; a
-resumed run takes its answers from it in that order (queuing nothing on the
-learners until the journal is spent), then sends the calls still
-outstanding, the ones in flight at the kill among them, in any order.
+Every learner call goes through one scheduler, whose calls are outstanding
+until answered. ``start_train``, ``start_evaluate`` and ``start_copy``
+queue a call under a key that names it (e.g. ``m3/local/B1``; a call the
+strategy does not name is ``call<n>``, n its place in the run); ``train``,
+``evaluate`` and ``copy`` queue one and wait for its answer, and a
+sequential strategy calls only those, so that it is the K = 1 case: one
+call outstanding at a time. The queue goes first in, first out to the free
+learners (lowest index first); ``wait_for``, ``wait_any`` and ``wait_all``
+take answers in the order they come and hand each to its call's
+``when_done`` in the strategy's thread, so every decision is made between
+two answers. A ``CallJournal`` records each answer with its key and the
+learner that gave it, in the order they came; a resumed run takes its
+answers from it in that order (queuing nothing on the learners until the
+journal is spent), then sends the calls still outstanding, the ones in
+flight at the kill among them, in any order.
+
+Seeds: a call's episodes and SAC's sampling are a function of the run seed
+and the call, not of what the learner did before (limits:
+``Trainer._seeded``). A run without ``parallel_locals`` asks its calls in
+one order, which its strategy fixes: the n-th call (0-based, copies
+counted) gets ``derived_seed(seed, n)``, as sequential runs always have,
+so their journals resume. With ``parallel_locals`` the order of the calls
+depends on which learner answers first, so a call's seed comes from the
+run seed and its key. A journal line without a key was written by a
+sequential run before calls had keys: it answers the one call outstanding.
+
 A call whose learner went away (``resend_on``: a killed pair that did not
 come back in time) goes back to the front of the queue, to the next free
 learner (a Train goal resumes from its checkpoint in the shared policy
@@ -216,7 +228,7 @@ class ThreadedCalls:
 @dataclass
 class _Call:
     key: str
-    name: str  # "train" or "evaluate"
+    name: str  # "train", "evaluate" or "copy"
     task: str  # the task a train call decides; ""
     arguments: dict  # as journaled
     ask: Callable[[Learner], Any]
@@ -230,13 +242,12 @@ class Run:
     def __init__(self, config: RunConfig, learner: Learner, observer: RunObserver | None = None, *,
                  learners: Sequence[Learner] = (), journal: CallJournal | None = None,
                  calls: CallRunner | None = None, resend_on: tuple[type[BaseException], ...] = ()):
-        """``learner`` answers the blocking calls; ``learners`` (default: ``learner`` alone) the
-        outstanding ones, run by ``calls`` (default: a thread each) and journaled in ``journal``.
-        An outstanding call that raises one of ``resend_on`` (its learner went away and did not come
-        back in time) goes back to the front of the queue, for the next free learner, up to
-        ``MAX_SENDS`` times in all; any other exception ends the run (which resumes from its journal)."""
+        """``learners`` (default: ``learner`` alone) answer the calls, run by ``calls`` (default: a thread
+        each) and journaled in ``journal`` (default: none). A call that raises one of ``resend_on`` (its
+        learner went away and did not come back in time) goes back to the front of the queue, for the next
+        free learner, up to ``MAX_SENDS`` times in all; any other exception ends the run (which resumes
+        from its journal)."""
         self.config = config
-        self.learner = learner
         self.learners = list(learners) or [learner]
         self.journal = journal
         self.calls = calls or ThreadedCalls()
@@ -251,6 +262,7 @@ class Run:
                               step_budget=config.step_budget, milestone_interval=config.milestone_interval,
                               remaining_tasks=sorted_tasks(config.tasks), current_policy=config.initial_policy)
         self._assignments = 0
+        self._calls = 0  # calls queued so far: the next one's place in the run
         self._stranded_steps = 0  # the budget's last steps, fewer than the learner's lockstep batch
 
     # What strategies ask.
@@ -276,35 +288,28 @@ class Run:
     def is_learned(self, task: str) -> bool:
         return task in self.state.learned_tasks
 
-    def evaluate(self, policy: str, tasks: list[str]) -> dict[str, float]:
-        self._update(status=STATUS_EVALUATING, current_task="")
-        scores = self.learner.evaluate(policy, tasks, self.config.eval_episodes)
-        self.state.evaluation_episodes += self.config.eval_episodes * len(tasks)
+    # Calls that wait for their answer: a sequential strategy asks only these.
+    def evaluate(self, policy: str, tasks: list[str], key: str = "") -> dict[str, float]:
+        """The scores of ``policy`` on ``tasks`` (S-bar episodes each)."""
+        scores: dict[str, float] = {}
+        self.wait_for(self.start_evaluate(policy, tasks, key, scores.update))
         return scores
 
-    def train(self, role: int, request: TrainGoal) -> TrainResult:
+    def train(self, role: int, request: TrainGoal, key: str = "") -> TrainResult:
         """Run one goal, its budget clipped to what the run has left, judged by the run's B and S-bar."""
-        steps_left = self.steps_left
-        request = replace(request, step_budget=min(request.step_budget, steps_left),
-                          threshold=self.config.threshold, eval_episodes=self.config.eval_episodes)
-        self.observer.assigned(Assignment(self._assignments, self.state.iteration, role, request.task,
-                                          request.episode_tasks, request.initial_policy, request.output_policy,
-                                          request.step_budget))
-        self._assignments += 1
-        self._update(status=_STATUS_OF_ROLE[role], current_task=request.task)
-        result = self.learner.train(request)
-        self.state.total_steps += result.steps_used
-        if request.step_budget == steps_left and result.steps_used == 0 and not result.learned:
-            self._stranded_steps = steps_left
-        # A milestone the goal ended on exactly waits: the strategy may mark a task learned at it.
-        self._record_milestones(through=self.state.total_steps - 1)
-        self._update()
-        return result
+        results: list[TrainResult] = []
+        self.wait_for(self.start_train(role, request, key, results.append))
+        return results[0]
 
-    # Outstanding calls (see the module doc).
+    def copy(self, source: str, destination: str, key: str = "") -> None:
+        """Store a copy of policy ``source`` as ``destination``."""
+        self.wait_for(self.start_copy(source, destination, key))
+
+    # Outstanding calls (see the module doc): each returns its key.
     def start_evaluate(self, policy: str, tasks: list[str], key: str,
-                       when_done: Callable[[dict[str, float]], None]) -> None:
-        episodes, seed = self.config.eval_episodes, self._seed(key)
+                       when_done: Callable[[dict[str, float]], None]) -> str:
+        key, seed = self._key_and_seed(key)
+        episodes = self.config.eval_episodes
         self._update(status=STATUS_EVALUATING, current_task="")
 
         def done(scores: dict[str, float]) -> None:
@@ -315,16 +320,17 @@ class Run:
                                                        "seed": seed}),
                           lambda learner: learner.evaluate(policy, list(tasks), episodes, seed), lambda a: a,
                           lambda answer: {"evaluation_episodes": episodes * len(answer)}, done))
+        return key
 
     def start_train(self, role: int, request: TrainGoal, key: str,
-                    when_done: Callable[[TrainResult], None]) -> None:
+                    when_done: Callable[[TrainResult], None]) -> str:
         """Queue one goal, clipped to the steps left after those in flight (at least 1 must be left)."""
         steps_left = self.steps_left
         if steps_left < 1:
-            raise ValueError(f"no steps left for {key}")
+            raise ValueError(f"no steps left for {key or 'a goal'}")
+        key, seed = self._key_and_seed(key)
         request = replace(request, step_budget=min(request.step_budget, steps_left),
-                          threshold=self.config.threshold, eval_episodes=self.config.eval_episodes,
-                          seed=self._seed(key))
+                          threshold=self.config.threshold, eval_episodes=self.config.eval_episodes, seed=seed)
         self.observer.assigned(Assignment(self._assignments, self.state.iteration, role, request.task,
                                           request.episode_tasks, request.initial_policy, request.output_policy,
                                           request.step_budget))
@@ -334,6 +340,7 @@ class Run:
             self.state.total_steps += result.steps_used
             if request.step_budget == steps_left and result.steps_used == 0 and not result.learned:
                 self._stranded_steps += request.step_budget
+            # A milestone the goal ended on exactly waits: the strategy may mark a task learned at it.
             self._record_milestones(through=self.state.total_steps - 1)
             self._update()
             when_done(result)
@@ -342,6 +349,15 @@ class Run:
                           train_result, lambda answer: {"training_steps": answer.steps_used}, done,
                           reserved_steps=request.step_budget))
         self._update(status=_STATUS_OF_ROLE[role], current_task=request.task)
+        return key
+
+    def start_copy(self, source: str, destination: str, key: str,
+                   when_done: Callable[[None], None] = lambda answer: None) -> str:
+        key, _ = self._key_and_seed(key)
+        self._queue(_Call(key, "copy", "", {"source": source, "destination": destination},
+                          lambda learner: learner.copy(source, destination), lambda answer: None,
+                          lambda answer: {}, when_done))
+        return key
 
     def wait_for(self, key: str) -> None:
         while key in self._outstanding:
@@ -354,8 +370,14 @@ class Run:
         while self._outstanding:
             self._take_answer()
 
-    def _seed(self, key: str) -> int:
-        return derived_seed(self.config.seed, *key.encode())
+    def _key_and_seed(self, key: str) -> tuple[str, int]:
+        """The next call's key (``call<n>`` when the strategy names none) and seed (see the module doc)."""
+        index = self._calls
+        self._calls += 1
+        key = key or f"call{index}"
+        if self.config.parallel_locals:
+            return key, derived_seed(self.config.seed, *key.encode())
+        return key, derived_seed(self.config.seed, index)
 
     def _queue(self, call: _Call) -> None:
         if call.key in self._outstanding:
@@ -381,10 +403,12 @@ class Run:
             raise RuntimeError("no call is outstanding")
         if self.journal is not None and self.journal.replaying:
             entry = self.journal.next_entry()
-            call = self._outstanding.get(entry["key"])
+            key = entry.get("key") or self._only_outstanding()  # written before sequential calls had keys
+            call = self._outstanding.get(key)
             if call is None or (call.name, call.arguments) != (entry["call"], entry["arguments"]):
-                raise JournalMismatch(f"{self.journal.path}: journaled {entry['key']} {entry['call']} "
-                                      f"{entry['arguments']}, but the run has no such call outstanding")
+                raise JournalMismatch(f"{self.journal.path}, entry {self.journal.replayed}: journaled {key} "
+                                      f"{entry['call']} {entry['arguments']}, but the run has no such call "
+                                      "outstanding (a run of other code?)")
             self._queued.remove(call.key)
             answer = call.load(entry["answer"])
         else:
@@ -407,6 +431,12 @@ class Run:
         del self._outstanding[call.key]
         call.done(answer)
         self._dispatch()
+
+    def _only_outstanding(self) -> str:
+        if len(self._outstanding) != 1:
+            raise JournalMismatch(f"{self.journal.path}: a line without a key (a sequential run's) while "
+                                  f"{len(self._outstanding)} calls are outstanding")
+        return next(iter(self._outstanding))
 
     def _watch(self, slot: int) -> None:
         """Take ``slot`` until its learner is ready again (see the module doc)."""
