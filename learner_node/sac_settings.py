@@ -31,7 +31,7 @@ recipes ``glocal-ros bench transfer`` compares.
 from __future__ import annotations
 
 import os
-from dataclasses import dataclass
+from dataclasses import asdict, dataclass
 from typing import Any, Literal
 
 #: Compute threads of the learner's process: XLA's (JAX) and torch's (stable-baselines3's buffers).
@@ -258,6 +258,33 @@ class FineTuning:
     ``"stored"``: the stored model's, as SB3 and Stable Baselines 2 load it.
     ``"initial"``: a new model's (1.0 for ``ent_coef="auto"``), so a goal
     explores as a new model does. Only for a model loaded from the store.
+
+    The three below are the published remedies for a fine-tuned policy that
+    first forgets its parent (issue 45's dip), each off by default:
+
+    ``actor_learning_rate``: the actor's own Adam step size, the critics
+    keeping the goal's ``learning_rate`` (None: the same as theirs), so the
+    critics fit the new task before the actor has moved far.
+
+    ``warm_start_steps``: WSRL's warm start (Zhou et al. 2024): the goal's
+    first this many env steps act with the loaded policy and run no
+    gradient step, so that the first updates see the new task's
+    transitions of the policy being tuned. Needs ``first_actions="policy"``;
+    with ``experience`` 0 it is WSRL's "no retained data". Only for a model
+    loaded from the store.
+
+    ``parent_anchor`` and ``anchor_decay_steps``: a behaviour-cloning term
+    to the goal's starting actor (kickstarting, Schmitt et al. 2018; the
+    BC-regularised fine-tuning of Wolczyk et al. 2024). The actor's loss
+    gains ``weight x mean|Q(s, pi(s))| x ||mu(s) - mu_start(s)||^2`` on each
+    minibatch, mu the actor's deterministic action (its mode) and |Q|
+    without gradient, so the term is ``1 / weight`` times smaller than the Q
+    term in TD3+BC's scaling (TD3+BC's alpha 2.5 is a weight of 0.4). The
+    weight falls linearly from ``parent_anchor`` at the goal's first step to
+    0 at ``anchor_decay_steps`` training steps. The start is the actor the
+    goal starts with (its task inputs as ``new_task_inputs`` sets them), so
+    the anchor holds the starting score. Only for a model loaded from the
+    store; 0: no anchor (SBX's actor update, untouched).
     """
 
     first_actions: FirstActions = "random"
@@ -270,6 +297,10 @@ class FineTuning:
     optimizers: Optimizers = "stored"
     new_task_inputs: NewTaskInputs = "initial"
     entropy_coefficient: EntropyStart = "stored"
+    actor_learning_rate: float | None = None  # None: the critics' (``learning_rate``)
+    warm_start_steps: int = 0
+    parent_anchor: float = 0.0
+    anchor_decay_steps: int = 0
 
     def __post_init__(self) -> None:
         if self.first_actions not in ("random", "policy"):
@@ -294,6 +325,28 @@ class FineTuning:
             raise ValueError(f"entropy_coefficient must be 'stored' or 'initial', got {self.entropy_coefficient!r}")
         if self.critic_warmup < 0:
             raise ValueError(f"critic_warmup must not be negative, got {self.critic_warmup}")
+        if self.actor_learning_rate is not None and not self.actor_learning_rate > 0:
+            raise ValueError(f"actor_learning_rate must be positive, got {self.actor_learning_rate}")
+        if self.warm_start_steps < 0 or (self.warm_start_steps and self.first_actions != "policy"):
+            raise ValueError(f"warm_start_steps must not be negative, and acts with the policy: it needs "
+                             f"first_actions 'policy', got {self.warm_start_steps} with {self.first_actions!r}")
+        if self.parent_anchor < 0 or (self.parent_anchor > 0) != (self.anchor_decay_steps > 0):
+            raise ValueError(f"parent_anchor must not be negative, and an anchor needs anchor_decay_steps of at "
+                             f"least 1 (and only an anchor has them), got {self.parent_anchor} over "
+                             f"{self.anchor_decay_steps} steps")
+
+    def key(self) -> dict:
+        """The recipe as checkpoints and finished goals record it: the fields added after the first
+        checkpoints were written appear only when set, so that those goals still resume."""
+        recorded = asdict(self)
+        for name, default in _ADDED_LATER.items():
+            if recorded[name] == default:
+                del recorded[name]
+        return recorded
+
+
+#: FineTuning's fields that checkpoints written before them lack, at their defaults.
+_ADDED_LATER = {"actor_learning_rate": None, "warm_start_steps": 0, "parent_anchor": 0.0, "anchor_decay_steps": 0}
 
 
 #: The recipes ``glocal-ros bench transfer`` measured (``bench/results/transfer*.md``). The learner's default is
@@ -324,6 +377,21 @@ FINE_TUNING_RECIPES: dict[str, FineTuning] = {
     "parent-experience-task-inputs-lr1e-4": FineTuning(
         first_actions="policy", experience=EXPERIENCE_TRANSITIONS, new_task_inputs="trained-mean",
         learning_rate=1e-4),
+    # The remedies for the dip, each the default and one change (bench/results/transfer-remedies.md): a
+    # decaying anchor to the starting actor (TD3+BC's alpha 2.5, gone by half of a 24,000-step screen),
+    # an actor ten times slower than the critics (with and without critic warm-up), and WSRL's start
+    # (2,000 steps with the policy and no update, no parent experience).
+    "parent-experience-task-inputs-anchor": FineTuning(
+        first_actions="policy", experience=EXPERIENCE_TRANSITIONS, new_task_inputs="trained-mean",
+        parent_anchor=0.4, anchor_decay_steps=12_000),
+    "parent-experience-task-inputs-slow-actor": FineTuning(
+        first_actions="policy", experience=EXPERIENCE_TRANSITIONS, new_task_inputs="trained-mean",
+        actor_learning_rate=3e-5),
+    "parent-experience-task-inputs-slow-actor-critic-warmup-2000": FineTuning(
+        first_actions="policy", experience=EXPERIENCE_TRANSITIONS, new_task_inputs="trained-mean",
+        actor_learning_rate=3e-5, critic_warmup=2000),
+    "task-inputs-wsrl-2000": FineTuning(first_actions="policy", new_task_inputs="trained-mean",
+                                        warm_start_steps=2000),
 }
 DEFAULT_RECIPE = "parent-experience-task-inputs"
 DEFAULT_FINE_TUNING = FINE_TUNING_RECIPES[DEFAULT_RECIPE]

@@ -86,7 +86,7 @@ from learner_node.replay_buffer import Experience
 from learner_node.profiles import DEFAULT_PROFILE, PROFILES, LearnerProfile
 from learner_node.sac_settings import FineTuning, seed_keys
 from learner_node.scalars import RECENT_EPISODES, GoalScalars
-from learner_node.updates import OverlappedUpdates, TransitionRing, sample_actions
+from learner_node.updates import Anchor, OverlappedUpdates, TransitionRing, sample_actions
 from learner_node.vec_env import BatchVecEnv, TaskCycle
 
 #: Largest step budget of one goal: the paper's whole run is 4M steps; a budget beyond this is a typo
@@ -183,6 +183,8 @@ class _GoalState:
     learned: bool = False
     steps_at_last_eval: int = 0
     critic_warmup: int = 0  # the goal's first steps whose gradient steps leave the actor as it is
+    warm_start_steps: int = 0  # the goal's first steps that run no gradient step (``FineTuning.warm_start_steps``)
+    anchored: bool = False  # the actor's loss has ``FineTuning.parent_anchor``'s term
 
 
 class Trainer:
@@ -212,7 +214,7 @@ class Trainer:
     @property
     def learner_key(self) -> dict:
         """What besides the spec decides a goal: a checkpoint of another profile or recipe is not resumed."""
-        return {"profile": self.profile.name, "fine_tuning": asdict(self.fine_tuning)}
+        return {"profile": self.profile.name, "fine_tuning": self.fine_tuning.key()}
 
     def train(
         self,
@@ -340,9 +342,10 @@ class _Goal:
         self.latest_instruments = Instruments()
         self.seed_streams()
         self.tune()
-        self.updates = OverlappedUpdates(self.model, self.ring, inclusive_start=self.tuning.random_steps is not None)
-        self.vec_env.while_stepping = self.updates.pay
         self.start_timesteps = self.model.num_timesteps - self.state.steps_used  # the model's count at step 0
+        self.updates = OverlappedUpdates(self.model, self.ring, inclusive_start=self.tuning.random_steps is not None,
+                                         anchor=self.anchor(initial))
+        self.vec_env.while_stepping = self.updates.pay
         self.last_checkpoint = self.state.steps_used
         self.last_progress = 0.0
         self.started = time.monotonic()
@@ -389,9 +392,21 @@ class _Goal:
         model = load_model(str(trainer.policies.model_path(spec.initial_policy)), env=self.vec_env)
         ring = TransitionRing.for_model(model)
         self.start_buffer(model, ring)
-        self.state.critic_warmup = self.tuning.critic_warmup  # a warm model's critic has seen its data
+        # A warm model's critic has seen its data, and its actor is the goal's start.
+        self.state.critic_warmup = self.tuning.critic_warmup
+        self.state.warm_start_steps = self.tuning.warm_start_steps
+        self.state.anchored = self.tuning.parent_anchor > 0
         start_fine_tuning(model, self.tuning, spec.episode_tasks or (spec.task,))
         return model, ring, 0
+
+    def anchor(self, initial) -> Anchor | None:
+        """``FineTuning.parent_anchor``'s anchor: the actor the goal started with, from the stored ``initial``
+        model (so a resumed goal anchors where the goal began)."""
+        if not self.state.anchored:
+            return None
+        start = goal_start_actor(initial, self.tuning, self.spec.episode_tasks or (self.spec.task,))
+        return Anchor(start.actor_state.params, self.tuning.parent_anchor, self.tuning.anchor_decay_steps,
+                      self.start_timesteps)
 
     @cached_property
     def parent_experience(self) -> Experience | None:
@@ -421,7 +436,7 @@ class _Goal:
             model.learning_rate = self.tuning.learning_rate
             model._setup_lr_schedule()
         rate = model.lr_schedule(model._current_progress_remaining)
-        model.policy.actor_state.opt_state.hyperparams["learning_rate"] = rate
+        model.policy.actor_state.opt_state.hyperparams["learning_rate"] = self.tuning.actor_learning_rate or rate
         model.policy.qf_state.opt_state.hyperparams["learning_rate"] = model.initial_qf_learning_rate or rate
 
     def seed_streams(self) -> None:
@@ -577,7 +592,8 @@ class _Goal:
         self.stop_reason = self.should_stop()
         keep_going = (not self.stop_reason and not (spec.stop_when_learned and state.learned)
                       and not (spec.episode_limit and len(state.episodes) >= spec.episode_limit))
-        if keep_going:  # the step that stops the goal owes no updates (SB3's loop returns before them)
+        # The step that stops the goal owes no updates (SB3's loop returns before them); nor do warm-start ones.
+        if keep_going and steps > state.warm_start_steps:
             self.updates.owe(self.vec_env.num_envs, critic_only=steps <= state.critic_warmup)
         return keep_going
 

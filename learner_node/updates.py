@@ -33,6 +33,11 @@ SBX, and nothing else:
   (``owe``); the critic-only steps of ``FineTuning.critic_warmup`` skip the
   actor and entropy update inside the same compiled loop (SBX's
   ``policy_delay`` trick before).
+A goal with ``FineTuning.parent_anchor`` (an ``Anchor``) updates its actor
+with ``_anchored_actor_update``: SBX's ``update_actor`` with the anchor's
+term added to the loss, the same noise and dropout keys, then SBX's
+``update_temperature``; once the anchor's weight has decayed to 0 the goal
+goes back to SBX's own update.
 """
 
 from __future__ import annotations
@@ -47,6 +52,19 @@ import jax.numpy as jnp
 import numpy as np
 
 from learner_node.replay_buffer import TRANSITION_ARRAYS, Experience, read_arrays
+
+
+class Anchor(NamedTuple):
+    """``FineTuning.parent_anchor`` of one goal: the starting actor's parameters, the weight at the goal's
+    start, the training steps over which it falls to 0, and the model's step count at the goal's start."""
+
+    params: object
+    weight: float
+    decay_steps: int
+    start_timesteps: int
+
+    def weight_at(self, num_timesteps: int) -> float:
+        return self.weight * max(0.0, 1.0 - (num_timesteps - self.start_timesteps) / self.decay_steps)
 
 
 class UpdateInfo(NamedTuple):
@@ -160,14 +178,42 @@ class TransitionRing:
         return True
 
 
+def _anchored_actor_update(anchor_params, weight, actor_state, qf_state, ent_coef_state, observations,
+                           target_entropy, key):
+    """SBX's ``update_actor_and_temperature`` with the anchor's term in the actor's loss (see
+    ``FineTuning.parent_anchor``): ``weight x mean|Q| x ||mode - anchor's mode||^2``, |Q| without gradient."""
+    from sbx import SAC
+
+    key, dropout_key, noise_key = jax.random.split(key, 3)
+    anchor_actions = actor_state.apply_fn(anchor_params, observations).mode()
+
+    def actor_loss(params):
+        dist = actor_state.apply_fn(params, observations)
+        actor_actions = dist.sample(seed=noise_key)
+        log_prob = dist.log_prob(actor_actions).reshape(-1, 1)
+        qf_pi = qf_state.apply_fn(qf_state.params, observations, actor_actions, rngs={"dropout": dropout_key})
+        min_qf_pi = jnp.min(qf_pi, axis=0)
+        ent_coef_value = ent_coef_state.apply_fn({"params": ent_coef_state.params})
+        distance = jnp.sum((dist.mode() - anchor_actions) ** 2, axis=-1).mean()
+        scale = jax.lax.stop_gradient(jnp.abs(min_qf_pi).mean())
+        return (ent_coef_value * log_prob - min_qf_pi).mean() + weight * scale * distance, -log_prob.mean()
+
+    (actor_loss_value, entropy), grads = jax.value_and_grad(actor_loss, has_aux=True)(actor_state.params)
+    actor_state = actor_state.apply_gradients(grads=grads)
+    ent_coef_state, ent_coef_loss_value = SAC.update_temperature(target_entropy, ent_coef_state, entropy)
+    return actor_state, qf_state, ent_coef_state, actor_loss_value, ent_coef_loss_value, key
+
+
 def _gradient_steps(qf_state, actor_state, ent_coef_state, key, arrays, size, steps, critic_only, constants,
-                    batch_size: int):
+                    anchor, batch_size: int):
     """``steps`` of SBX's SAC gradient step on minibatches drawn from the first ``size`` rows of ``arrays``;
-    the first ``critic_only`` of them leave the actor and the entropy coefficient as they are."""
+    the first ``critic_only`` of them leave the actor and the entropy coefficient as they are. ``anchor``:
+    None, or (the anchor's actor parameters, its weight now) for ``_anchored_actor_update``."""
     from sbx import SAC
 
     tau, gamma, target_entropy = constants
     zero = jnp.zeros((), jnp.float32)
+    update_actor = SAC.update_actor_and_temperature if anchor is None else partial(_anchored_actor_update, *anchor)
 
     def one_step(i, carry):
         qf_state, actor_state, ent_coef_state, key, info = carry
@@ -181,7 +227,7 @@ def _gradient_steps(qf_state, actor_state, ent_coef_state, key, arrays, size, st
             batch["next_observations"], batch["rewards"], dones, discounts, key)
         qf_state = SAC.soft_update(tau, qf_state)
         actor_state, qf_state, ent_coef_state, actor_loss, ent_coef_loss, key = jax.lax.cond(
-            i >= critic_only, SAC.update_actor_and_temperature,
+            i >= critic_only, update_actor,
             lambda *_: (actor_state, qf_state, ent_coef_state, info[0], info[2], key),
             actor_state, qf_state, ent_coef_state, batch["observations"], target_entropy, key)
         return qf_state, actor_state, ent_coef_state, key, (actor_loss, critic_loss, ent_coef_loss, ent_coef_value)
@@ -192,17 +238,17 @@ def _gradient_steps(qf_state, actor_state, ent_coef_state, key, arrays, size, st
 
 @partial(jax.jit, static_argnames="batch_size", donate_argnums=0)
 def _insert_and_update(arrays, rows, position, size, qf_state, actor_state, ent_coef_state, key, steps, critic_only,
-                       constants, batch_size: int):
+                       constants, anchor, batch_size: int):
     arrays = _write_rows(arrays, rows, position)
     return arrays, _gradient_steps(qf_state, actor_state, ent_coef_state, key, arrays, size, steps, critic_only,
-                                   constants, batch_size)
+                                   constants, anchor, batch_size)
 
 
 @partial(jax.jit, static_argnames="batch_size")
-def _update(arrays, size, qf_state, actor_state, ent_coef_state, key, steps, critic_only, constants,
+def _update(arrays, size, qf_state, actor_state, ent_coef_state, key, steps, critic_only, constants, anchor,
             batch_size: int):
     return _gradient_steps(qf_state, actor_state, ent_coef_state, key, arrays, size, steps, critic_only, constants,
-                           batch_size)
+                           anchor, batch_size)
 
 
 @jax.jit
@@ -222,9 +268,10 @@ def sample_actions(policy, observations: np.ndarray) -> np.ndarray:
 class OverlappedUpdates:
     """A goal's transitions waiting for the ring, and the gradient steps it owes; ``pay`` runs both at once."""
 
-    def __init__(self, model, ring: TransitionRing, inclusive_start: bool = False):
+    def __init__(self, model, ring: TransitionRing, inclusive_start: bool = False, anchor: Anchor | None = None):
         self.model = model
         self.ring = ring
+        self.anchor = anchor
         # SB3 updates from the step after the one that reaches learning_starts; Stable Baselines 2 from
         # that very step (its first gradient step follows the learning_starts-th transition).
         self.inclusive_start = inclusive_start
@@ -284,16 +331,18 @@ class OverlappedUpdates:
         # numpy scalars, not jnp's: each jnp scalar is a dispatch of its own
         constants = (np.float32(model.tau), np.float32(model.gamma), np.float32(model.target_entropy))
         states = (policy.qf_state, policy.actor_state, model.ent_coef_state, model.key)
+        weight = 0.0 if self.anchor is None else self.anchor.weight_at(model.num_timesteps)
+        anchor = (self.anchor.params, np.float32(weight)) if weight > 0 else None
         if rows is not None:
             count = len(rows["observations"])
             size = min(ring.size + count, ring.capacity)
             ring.arrays, result = _insert_and_update(
                 ring.arrays, rows, np.int32(ring.pos), np.int32(size), *states, np.int32(steps),
-                np.int32(critic_only), constants, batch_size=int(model.batch_size))
+                np.int32(critic_only), constants, anchor, batch_size=int(model.batch_size))
             ring.advance(count)
         elif steps:
             result = _update(ring.arrays, np.int32(ring.size), *states, np.int32(steps), np.int32(critic_only),
-                             constants, batch_size=int(model.batch_size))
+                             constants, anchor, batch_size=int(model.batch_size))
         else:
             return
         policy.qf_state, policy.actor_state, model.ent_coef_state, model.key, self._info_arrays = result

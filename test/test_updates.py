@@ -1,6 +1,8 @@
 """The learner's gradient steps run while the sim steps, in one compiled call per step: SB3's updates, a step
 later, none lost; and the fine-tuning recipe decides how a goal starts."""
 
+from dataclasses import asdict
+
 import numpy as np
 import pytest
 
@@ -77,12 +79,17 @@ def test_each_steps_updates_run_during_the_next_step_and_the_last_at_the_end(tmp
     assert stored._n_updates - policies.model("prior")._n_updates == num_envs * vector_steps_with_updates
 
 
+#: WSRL's warm start of the prior's batch (64) steps, and an actor slower than the critics.
+WARM_START_SLOW_ACTOR = FineTuning(first_actions="policy", warm_start_steps=64, actor_learning_rate=1e-5)
+
+
 @pytest.mark.parametrize("recipe", ["random-first", "policy-first", "policy-first-lr1e-4",
-                                    FineTuning(first_actions="random", batch_size=32)])
+                                    FineTuning(first_actions="random", batch_size=32), WARM_START_SLOW_ACTOR])
 def test_a_recipe_chooses_the_first_actions_and_the_rate_and_updates_wait_for_a_batch(tmp_path, monkeypatch, recipe):
     """SB3's warm-up draws a batch of random actions; "policy" acts with the loaded policy at once. Either way
-    the first gradient step comes once the buffer holds a batch, so both update equally often. A recipe's batch
-    (None: the stored model's own) is the batch of every update."""
+    the first gradient step comes once the buffer holds a batch, so both update equally often; so does a warm
+    start of a batch's steps, acting with the policy and updating nothing meanwhile. A recipe's batch (None:
+    the stored model's own) is the batch of every update, and its rates those of the optimisers."""
     from gymnasium.spaces import Box
 
     tuning = recipe if isinstance(recipe, FineTuning) else fine_tuning_recipe(recipe)
@@ -119,8 +126,9 @@ def test_a_recipe_chooses_the_first_actions_and_the_rate_and_updates_wait_for_a_
     assert stored.batch_size == batch
     rate = tuning.learning_rate or prior.learning_rate
     assert stored.learning_rate == rate
-    for state in (stored.policy.actor_state, stored.policy.qf_state):
-        assert state.opt_state.hyperparams["learning_rate"] == pytest.approx(rate)
+    actor_rate = stored.policy.actor_state.opt_state.hyperparams["learning_rate"]
+    assert actor_rate == pytest.approx(tuning.actor_learning_rate or rate)
+    assert stored.policy.qf_state.opt_state.hyperparams["learning_rate"] == pytest.approx(rate)
 
 
 def test_an_unknown_recipe_or_setting_is_refused_with_the_choices():
@@ -132,6 +140,57 @@ def test_an_unknown_recipe_or_setting_is_refused_with_the_choices():
         FineTuning(batch_size=0)
     with pytest.raises(ValueError, match="critic_warmup"):
         FineTuning(critic_warmup=-1)
+    with pytest.raises(ValueError, match="actor_learning_rate"):
+        FineTuning(actor_learning_rate=0)
+    with pytest.raises(ValueError, match="first_actions 'policy'"):
+        FineTuning(warm_start_steps=100)
+    with pytest.raises(ValueError, match="anchor_decay_steps"):
+        FineTuning(parent_anchor=0.4)
+    with pytest.raises(ValueError, match="anchor_decay_steps"):
+        FineTuning(anchor_decay_steps=1000)
+
+
+def test_a_recipe_records_the_remedies_only_when_set_so_checkpoints_written_before_them_resume():
+    assert FineTuning().key() == {name: value for name, value in asdict(FineTuning()).items()
+                                  if name not in ("actor_learning_rate", "warm_start_steps", "parent_anchor",
+                                                  "anchor_decay_steps")}
+    assert FineTuning(parent_anchor=0.4, anchor_decay_steps=1000).key()["parent_anchor"] == 0.4
+
+
+def test_the_anchor_keeps_the_actor_near_where_the_goal_started_and_fades(tmp_path):
+    """Two goals from the prior on an object it does not grasp, the same seed, one with a heavy anchor: its
+    actor ends nearer its start (the deterministic actions on the goal's own observations). The weight
+    falls linearly to 0 at the decay's end."""
+    from learner_node.fine_tuning import goal_start_actor
+    from learner_node.updates import Anchor
+
+    anchor = Anchor(params=None, weight=0.4, decay_steps=1000, start_timesteps=500)
+    assert [anchor.weight_at(t) for t in (500, 1000, 1500, 2500)] == pytest.approx([0.4, 0.2, 0.0, 0.0])
+
+    envs = BatchedEnvs(lambda i: GraspEnv("G5"), 2, "G5")
+    policies = PolicyRegistry(PolicyStore(tmp_path / "store"), [PolicyStore(assets_dir() / "priors")])
+    recipes = {"free": FineTuning(first_actions="policy"),
+               "anchored": FineTuning(first_actions="policy", parent_anchor=100.0, anchor_decay_steps=10_000)}
+    try:
+        for name, tuning in recipes.items():
+            Trainer(envs, policies, tmp_path / "checkpoints", fine_tuning=tuning).train(TrainGoal(
+                "G5", "prior", name, step_budget=400, threshold=0, eval_episodes=1, seed=3))
+    finally:
+        envs.close()
+    probe = GraspEnv("G5")
+    try:
+        observations = np.stack([probe.reset(seed=seed)[0] for seed in range(16)]).astype(np.float32)
+    finally:
+        probe.close()
+    start = goal_start_actor(policies.model("prior"), recipes["free"], ("G5",)).actor_state
+
+    def moved(policy):
+        actor = policies.model(policy).policy.actor_state
+        ends = np.asarray(actor.apply_fn(actor.params, observations).mode())
+        begins = np.asarray(start.apply_fn(start.params, observations).mode())
+        return float(np.linalg.norm(ends - begins, axis=-1).mean())
+
+    assert moved("anchored") < 0.5 * moved("free"), (moved("anchored"), moved("free"))
 
 
 def test_critic_warmup_leaves_the_actor_alone_for_the_first_steps_then_updates_both(tmp_path, monkeypatch):
