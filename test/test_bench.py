@@ -2,14 +2,15 @@
 timings or scores."""
 
 import re
+from dataclasses import replace
 from pathlib import Path
 
 import pytest
 
 from glocal_app.benches.backends import BACKENDS, BackendsBenchRow, backends_bench_report, run_backends_bench
 from glocal_app.benches.learner import LearnerBenchRow, learner_bench_report, run_learner_bench
-from glocal_app.benches.transfer import (TransferGoal, TransferSettings, read_transfer_goals, run_transfer_bench,
-                                        run_transfer_graph, transfer_bench_report)
+from glocal_app.benches.transfer import (INSTRUMENTS, TransferGoal, TransferSettings, read_transfer_goals,
+                                        run_transfer_bench, run_transfer_graph, transfer_bench_report)
 from glocal_app.bench_cli import cmd_bench_backends, cmd_bench_learner, cmd_bench_transfer
 from glocal_app.cli import build_parser
 from glocal_ros.paths import assets_dir
@@ -143,6 +144,9 @@ def test_bench_transfer_runs_every_arm_on_the_same_episodes_and_tabulates_them(t
     for goal in goals:
         assert [steps for steps, _ in goal.curve] == [0, 4, 8]
         assert all(0 <= score <= 2 for _, score in goal.curve) and goal.wall_s > 0
+        # Each of the goal's own evaluations with its instruments (step 0 is scored outside the goal).
+        assert [(steps, sorted(values)) for steps, values in goal.instruments] == \
+            [(4, sorted(INSTRUMENTS)), (8, sorted(INSTRUMENTS))]
     assert len({goal.start for goal in goals}) == 1, "every arm starts from the same weights on the same episodes"
     assert len(log) == 4
 
@@ -154,6 +158,7 @@ def test_bench_transfer_runs_every_arm_on_the_same_episodes_and_tabulates_them(t
     assert len(rows) == 8  # one summary row and one goal row per arm
     assert all(line.count("|") == 14 for line in rows[:4])  # thirteen summary columns
     assert all(line.count("|") == 12 for line in rows[4:])  # profile, recipe, prior, task, seed, 3 scores, to B, drop, s
+    assert sum(line.startswith("| action distance | glocal_ros |") for line in report.splitlines()) == 4
 
     # The same goals through a sim_node and a learner_node: the same episodes, so the same start.
     (through_graph,) = run_transfer_graph(["policy-first"], ["A0"], [5], settings, log=log.append,
@@ -172,11 +177,14 @@ def test_a_transfer_report_is_read_back_and_tabulated_with_another(tmp_path, cap
     def goal(recipe, seed, *scores):
         return TransferGoal(recipe, "B1", seed, tuple(zip((0, 500, 1000), scores)), 20, settings.threshold, 12.0)
 
+    measured = replace(goal("a", 0, 3, 9, 16), instruments=(
+        (500, {"action distance": 0.25, "Q gap": -1.5, "entropy": 2.0}),
+        (1000, {"action distance": 0.5, "Q gap": 0.125, "entropy": -3.0})))
     first = tmp_path / "first.md"
-    first.write_text(transfer_bench_report([goal("a", 0, 3, 9, 16), goal("a", 1, 17, 18, 2)], "x", settings, 2))
+    first.write_text(transfer_bench_report([measured, goal("a", 1, 17, 18, 2)], "x", settings, 2))
     second = tmp_path / "second.md"
     second.write_text(transfer_bench_report([goal("b", 0, 3, 1, 4)], "y", settings, 2))
-    assert read_transfer_goals(first, settings) == [goal("a", 0, 3, 9, 16), goal("a", 1, 17, 18, 2)]
+    assert read_transfer_goals(first, settings) == [measured, goal("a", 1, 17, 18, 2)], "instruments read back too"
 
     out = tmp_path / "both.md"
     args = build_parser().parse_args(["bench", "transfer", "--budget", "1000", "--tabulate", str(first), str(second),

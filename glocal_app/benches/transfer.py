@@ -54,7 +54,7 @@ import sys
 import tempfile
 import time
 from concurrent.futures import ProcessPoolExecutor, ThreadPoolExecutor
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from multiprocessing import get_context
 from pathlib import Path
 from typing import Callable, Sequence
@@ -120,6 +120,9 @@ class TransferGoal:
     wall_s: float
     prior: str = INITIAL_POLICY
     profile: str = DEFAULT_PROFILE
+    #: (training steps, instrument -> value) at each of the goal's own evaluations (``learner_node.instruments``);
+    #: () where they were not heard (through the graph, or a report made before them).
+    instruments: tuple[tuple[int, dict[str, float]], ...] = ()
 
     @property
     def arm(self) -> tuple[str, str, str]:
@@ -205,13 +208,16 @@ def run_chain(recipe: str, prior: str, tasks: Sequence[str], seed: int, settings
                                     settings.eval_episodes, seed=derived_seed(seed, EVALUATION_STREAM, 0))
                 curve.append((0, start.successes))
             output = f"transfer-{number}"
+            heard: dict[int, dict[str, float]] = {}  # the progress report after each evaluation carries its instruments
             trainer.train(TrainGoal(task=task, initial_policy=start_policy, output_policy=output,
                                     step_budget=settings.step_budget, threshold=settings.threshold,
                                     eval_episodes=settings.eval_episodes, eval_interval=settings.eval_interval,
                                     stop_when_learned=settings.stop_at_threshold, seed=seed),
-                          on_evaluation=lambda score, steps: curve.append((steps, score.successes)))
+                          on_evaluation=lambda score, steps: curve.append((steps, score.successes)),
+                          on_progress=lambda progress: heard.update({progress.steps: instrument_values(progress)}))
             goals.append(TransferGoal(recipe, task, seed, tuple(curve), settings.eval_episodes, settings.threshold,
-                                      time.perf_counter() - started, start_policy, profile))
+                                      time.perf_counter() - started, start_policy, profile,
+                                      tuple((steps, heard[steps]) for steps, _ in curve if steps in heard)))
             if not passes_threshold(curve[-1][1], settings.threshold):
                 break
             start_policy = output
@@ -219,6 +225,21 @@ def run_chain(recipe: str, prior: str, tasks: Sequence[str], seed: int, settings
     finally:
         envs.close()
         shutil.rmtree(work, ignore_errors=True)
+
+
+#: What the report shows of a goal's instruments at each evaluation: name -> (what, from a TrainProgress).
+INSTRUMENTS: dict[str, tuple[str, Callable]] = {
+    "action distance": ("the mean distance of the deterministic action from the parent's",
+                        lambda i: i.action_distance),
+    "Q gap": ("Q(s, current action) - Q(s, parent's action), the critics' min",
+              lambda i: i.q_current_action - i.q_parent_action),
+    "entropy": ("the policy's entropy (one draw per state)", lambda i: i.policy_entropy),
+}
+
+
+def instrument_values(progress) -> dict[str, float]:
+    """The report's instruments of a ``TrainProgress``."""
+    return {name: float(value(progress.instruments)) for name, (_, value) in INSTRUMENTS.items()}
 
 
 def _run_goal(job: tuple[str, str, str, int, TransferSettings, Path | None, str]) -> TransferGoal:
@@ -394,11 +415,20 @@ def read_transfer_goals(path: Path, settings: TransferSettings) -> list[Transfer
     profile column) as of ``DEFAULT_PROFILE``.
     """
     expected = [str(steps) for steps in range(0, settings.step_budget + 1, settings.eval_interval)]
-    goals, columns = [], None
+    goals, columns, instrument_columns = [], None, None
+    heard: dict[tuple, dict[int, dict[str, float]]] = {}  # arm, task, seed -> steps -> instrument -> value
     for line in Path(path).read_text().splitlines():
         cells = [cell.strip() for cell in line.strip().strip("|").split("|")]
-        if "recipe" in cells and "task" in cells and "seed" in cells:
-            columns = cells
+        if "instrument" in cells and "seed" in cells:
+            columns, instrument_columns = None, cells
+        elif instrument_columns and len(cells) == len(instrument_columns) and not cells[0].startswith("---"):
+            row = dict(zip(instrument_columns, cells))
+            arm = (row["profile"], row["recipe"], row.get("prior", INITIAL_POLICY), row["task"], int(row["seed"]))
+            for steps in instrument_columns[instrument_columns.index("seed") + 1:]:
+                if row[steps] != "-":
+                    heard.setdefault(arm, {}).setdefault(int(steps), {})[row["instrument"]] = float(row[steps])
+        elif "recipe" in cells and "task" in cells and "seed" in cells:
+            columns, instrument_columns = cells, None
             scored_at = columns[columns.index("seed") + 1:columns.index("steps to B")]
             if scored_at != expected:
                 raise ValueError(f"{path}: its goals were scored at steps {', '.join(scored_at)}, not at "
@@ -413,7 +443,8 @@ def read_transfer_goals(path: Path, settings: TransferSettings) -> list[Transfer
                 row.get("profile", DEFAULT_PROFILE)))
     if not goals:
         raise ValueError(f"{path}: no per-goal table of a bench transfer report in it")
-    return goals
+    return [replace(goal, instruments=tuple(sorted(heard.get((*goal.arm, goal.task, goal.seed), {}).items())))
+            for goal in goals]
 
 
 def median_steps_to_b(goals: Sequence[TransferGoal]) -> float:
@@ -485,4 +516,17 @@ def transfer_bench_report(goals: Sequence[TransferGoal], command: str, settings:
                      + " | ".join(str(score) for _, score in g.curve)
                      + f" | {'-' if g.steps_to_b is None else g.steps_to_b} | {g.drop_points:.0f} "
                      f"| {g.wall_s:.0f} |")
+    measured = [g for g in goals if g.instruments]
+    if measured:
+        lines += ["", "What the instruments said at each of a goal's own evaluations (`learner_node/instruments.py`, "
+                  "on 256 states of the parent's experience): "
+                  + "; ".join(f"*{name}*, {what}" for name, (what, _) in INSTRUMENTS.items())
+                  + ". Step 0 is scored outside the goal, so it has none.", "",
+                  "| instrument | profile | recipe | prior | task | seed | " + " | ".join(str(s) for s in steps) + " |",
+                  "| --- | --- | --- | --- | --- | ---: | " + " | ".join("---:" for _ in steps) + " |"]
+        for name in INSTRUMENTS:
+            for g in measured:
+                values = dict(g.instruments)
+                lines.append(f"| {name} | {g.profile} | {g.recipe} | {g.prior} | {g.task} | {g.seed} | "
+                             + " | ".join(f"{values[s][name]:.3g}" if s in values else "-" for s in steps) + " |")
     return "\n".join(lines) + "\n"
