@@ -260,7 +260,8 @@ class FineTuning:
     explores as a new model does. Only for a model loaded from the store.
 
     The three below are the published remedies for a fine-tuned policy that
-    first forgets its parent (issue 45's dip), each off by default:
+    first forgets its parent (the dip, in the README's glossary), each off
+    by default:
 
     ``actor_learning_rate``: the actor's own Adam step size, the critics
     keeping the goal's ``learning_rate`` (None: the same as theirs), so the
@@ -278,8 +279,8 @@ class FineTuning:
     BC-regularised fine-tuning of Wolczyk et al. 2024). The actor's loss
     gains ``weight x mean|Q(s, pi(s))| x ||mu(s) - mu_start(s)||^2`` on each
     minibatch, mu the actor's deterministic action (its mode) and |Q|
-    without gradient, so the term is ``1 / weight`` times smaller than the Q
-    term in TD3+BC's scaling (TD3+BC's alpha 2.5 is a weight of 0.4). The
+    without gradient: TD3+BC's balance of the two terms with its alpha at
+    ``1 / weight`` (its 2.5 is a weight of 0.4). The
     weight falls linearly from ``parent_anchor`` at the goal's first step to
     0 at ``anchor_decay_steps`` training steps. The start is the actor the
     goal starts with (its task inputs as ``new_task_inputs`` sets them), so
