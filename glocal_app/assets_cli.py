@@ -8,6 +8,7 @@ from pathlib import Path
 
 from glocal_app.arguments import (
     add_prior_store_argument,
+    add_profile_argument,
     command_line,
     count,
     print_progress,
@@ -17,6 +18,7 @@ from glocal_app.benches.transfer import INITIAL_POLICY, TransferSettings
 from glocal_app.exit_codes import EXIT_FAILED, EXIT_OK
 from glocal_ros.paths import objects_dir
 from glocal_ros.tasks import sorted_tasks
+from learner_node.profiles import learner_profile
 from learner_node.sac_settings import DEFAULT_RECIPE
 
 
@@ -205,8 +207,8 @@ def cmd_assets_validate(args: argparse.Namespace) -> int:
                           if o.lifting_pose_share is not None},
         "best_pose": {t: o.best_pose_success for t, o in metadata.objects.items()
                       if o.best_pose_success is not None},
-        "prior": (prior_scores(args.out, tasks, args.episodes, seed=args.seed, prior_store=args.prior_store)
-                  if args.episodes else {}),
+        "prior": (prior_scores(args.out, tasks, args.episodes, seed=args.seed, profile=args.learner_profile,
+                               prior_store=args.prior_store) if args.episodes else {}),
         "steps_to_b": steps_to_b(goals),
     }
     figure = validation_figure(measures, args.report.with_suffix(".png"))
@@ -214,8 +216,9 @@ def cmd_assets_validate(args: argparse.Namespace) -> int:
     preamble = (f"Objects: `{args.out}` (generator {metadata.generator_version}, {metadata.source}). (a) and (b) "
                 f"from its `objects.json` (`glocal-ros assets check`), as are lifting poses and the best pose "
                 f"(`glocal-ros assets lifting-poses`); (c) {args.episodes} deterministic "
-                f"episodes of the prior ({args.prior_store or 'shipped'}) per object (seed {args.seed}), task "
-                f"bits it never trained on as the mean of the trained one; (d) steps to B from "
+                f"episodes of the `{args.learner_profile}` profile's prior ({args.prior_store or 'shipped'}) per "
+                f"object (seed {args.seed}), its task bits as the profile starts a goal's "
+                f"(`{learner_profile(args.learner_profile).fine_tuning.new_task_inputs}`); (d) steps to B from "
                 f"{cost or 'no goals'}. Figure: `{figure.name}`.")
     return write_bench_report(validation_report(measures, command, preamble), args.report)
 
@@ -287,6 +290,7 @@ def add_assets_commands(commands) -> None:
                               "whose goals give steps to B")
     validate.add_argument("--recipe", default=DEFAULT_RECIPE, help="the transfer reports' recipe to use")
     add_prior_store_argument(validate)
+    add_profile_argument(validate)
     validate.add_argument("--report", type=Path, default=Path("bench/results/assets-validate.md"),
                           help="the report; the figure is written beside it as .png")
     validate.set_defaults(func=cmd_assets_validate)
