@@ -100,6 +100,16 @@ def cmd_bench_graph(args: argparse.Namespace) -> int:
     return EXIT_OK if all(row.lost == 0 for row in rows) else EXIT_FAILED
 
 
+def cmd_bench_fewshot(args: argparse.Namespace) -> int:
+    from glocal_app.benches.fewshot import fewshot_report, run_fewshot_bench
+
+    settings = TransferSettings(step_budget=args.budget, eval_interval=args.eval_interval,
+                                eval_episodes=args.eval_episodes, num_envs=args.envs)
+    cases = run_fewshot_bench(args.runs, args.objects, [int(seed) for seed in args.seeds.split(",")], settings,
+                              args.per_third)
+    return write_bench_report(fewshot_report(cases, command_line(), settings, args.objects), args.out)
+
+
 def cmd_bench_transfer(args: argparse.Namespace) -> int:
     from glocal_app.benches.transfer import (
         read_transfer_goals,
@@ -272,7 +282,7 @@ def _add_cost_goal_arguments(command: argparse.ArgumentParser, default_envs: int
 
 
 def add_bench_commands(commands) -> None:
-    """``bench sim | graph | learner | backends | transfer | cost | stones | curriculum | scale``."""
+    """``bench sim | graph | learner | backends | fewshot | transfer | cost | stones | curriculum | scale``."""
     bench = commands.add_parser("bench", help="benchmarks; each writes its table with the command that made it")
     bench_commands = bench.add_subparsers(dest="bench_command", required=True)
     bench_sim = bench_commands.add_parser("sim", help="env steps/s in-process vs through sim_node")
@@ -337,6 +347,23 @@ def add_bench_commands(commands) -> None:
     bench_backends.add_argument("--out", type=Path, default=Path("bench/results/backends.md"))
     bench_backends.set_defaults(func=cmd_bench_backends)
     transfer_defaults = TransferSettings()
+    bench_fewshot = bench_commands.add_parser(
+        "fewshot", help="novel objects: steps to B from a run's best global policy, from the prior and from its "
+        "last policy")
+    bench_fewshot.add_argument("--runs", type=Path, nargs="+", required=True, metavar="RUN_DIR",
+                               help="finished GloCAL runs that kept their policies")
+    bench_fewshot.add_argument("--objects", type=Path, required=True, metavar="DIR",
+                               help="a set `assets generate --seed S` made with a seed the run's set did not use, "
+                               "its lifting poses measured")
+    bench_fewshot.add_argument("--per-third", type=count(1), default=3,
+                               help="objects from each third of the set's lifting-pose shares (default 3)")
+    bench_fewshot.add_argument("--seeds", default="0,1", help="comma-separated seeds (default 0,1)")
+    bench_fewshot.add_argument("--budget", type=int, default=60_000, help="training steps per goal at most")
+    bench_fewshot.add_argument("--eval-interval", type=int, default=2_000)
+    bench_fewshot.add_argument("--eval-episodes", type=int, default=20, help="S-bar; B is 75%% of it")
+    bench_fewshot.add_argument("--envs", type=int, default=transfer_defaults.num_envs, help="envs N per goal")
+    bench_fewshot.add_argument("--out", type=Path, default=Path("bench/results/fewshot.md"))
+    bench_fewshot.set_defaults(func=cmd_bench_fewshot)
     bench_transfer = bench_commands.add_parser(
         "transfer", help="fine-tuning the A0 prior on other objects: steps to B and collapses, recipe by recipe")
     bench_transfer.add_argument("--profiles", type=profile_list, default=[DEFAULT_PROFILE],

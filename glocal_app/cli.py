@@ -1,7 +1,7 @@
 """``glocal-ros``: the command line of the project.
 
 This module holds the commands that start or call the graph (run, evaluate,
-launch, experiment) and puts the parser together; each other group of
+launch, experiment, adapt) and puts the parser together; each other group of
 commands lives in a module of its own (``assets_cli``, ``bench_cli``,
 ``policy_cli``, ``bag_cli``, ``glocal_ros.analysis.report``) with its
 parser, its handlers and its argument checks. Subcommands that talk to a
@@ -117,6 +117,13 @@ def cmd_experiment(args: argparse.Namespace) -> int:
                       ray_cpus_per_run=args.ray_cpus_per_run)
 
 
+def cmd_adapt(args: argparse.Namespace) -> int:
+    from glocal_app.adapt import adapt_run, describe
+
+    print(describe(adapt_run(args.run, args.object, args.name, args.budget, args.seed)))
+    return EXIT_OK
+
+
 def add_graph_commands(commands) -> None:
     """``run``, ``evaluate``, ``launch`` and ``experiment``: the commands that start or call the graph."""
     run = commands.add_parser("run", help="start a node, as `ros2 run glocal_ros NODE` does")
@@ -173,6 +180,19 @@ def add_graph_commands(commands) -> None:
                         "K >= 2 the layout shows pair0 (default 1)")
     layout.add_argument("--out", type=Path, required=True, help="the layout file to write")
     layout.set_defaults(func=cmd_foxglove_layout)
+
+    adapt = commands.add_parser("adapt", help="a novel object: score a finished run's global policies, its last "
+                                "and the prior on it, and fine-tune the best until B (glocal_app.adapt)")
+    adapt.add_argument("run", type=Path, help="the directory of a finished run with global policies (glocal)")
+    adapt.add_argument("--object", type=Path, required=True,
+                       help="a mesh file (.obj, .stl, ...), or an object directory of a set (assets generate)")
+    adapt.add_argument("--name", required=True, help="the object's name: a letter, then letters, digits, _ or -; "
+                       "not a grid task's (A0..G6)")
+    adapt.add_argument("--budget", type=int, default=None, help="training steps at most (default: the run "
+                       "preset's per-task budget)")
+    adapt.add_argument("--seed", type=int, default=None, help="seed of the evaluations and the goal "
+                       "(default: the run's)")
+    adapt.set_defaults(func=cmd_adapt)
 
     experiment = commands.add_parser("experiment", help="strategies x seeds as separate runs (resumable), "
                                      "then one report")

@@ -453,11 +453,13 @@ def listen_for_progress(node, progress: Progress, watchdog: Watchdog, pairs: Seq
                                  qos.EPISODES, raw=True)
 
 
-def wait_for_recorder(node, started: Sequence[NodeProcess], timeout: float, pairs: Sequence[str] = ("",)) -> None:
+def wait_for_recorder(node, started: Sequence[NodeProcess], timeout: float, pairs: Sequence[str] = ("",),
+                      spun_elsewhere: bool = False) -> None:
     """Until the recorder listens to every pair's episode stream, so that the bag holds every episode from seq 0.
 
     ``RuntimeError`` naming the node and its log when a started node ends, or after ``timeout`` seconds the
-    streams that nothing publishes yet (a pair started elsewhere) or nothing records.
+    streams that nothing publishes yet (a pair started elsewhere) or nothing records. ``spun_elsewhere``: an
+    executor of its own spins ``node`` (``node_common.runner.spinning_node``), so this only waits.
     """
     deadline = time.monotonic() + timeout
     topics = [pair_name(pair, names.EPISODES) for pair in pairs]
@@ -466,7 +468,10 @@ def wait_for_recorder(node, started: Sequence[NodeProcess], timeout: float, pair
         return [topic for topic in topics if node.count_subscribers(topic) < 1 or node.count_publishers(topic) < 1]
 
     while waiting():
-        rclpy.spin_once(node, timeout_sec=0.1)
+        if spun_elsewhere:
+            time.sleep(0.1)
+        else:
+            rclpy.spin_once(node, timeout_sec=0.1)
         failed = [p for p in started if not p.running]
         if failed:
             raise RuntimeError(f"{failed[0].name} did not start: see {failed[0].log_path}")

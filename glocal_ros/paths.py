@@ -12,6 +12,8 @@ import os
 import sys
 from pathlib import Path
 
+from glocal_ros.tasks import object_name
+
 SOURCE_ROOT = Path(__file__).resolve().parent.parent
 
 
@@ -39,8 +41,9 @@ def objects_dir() -> Path:
 
 
 def object_urdf(objects: Path, task: str) -> Path:
-    """The URDF of ``task``'s object in the object set ``objects`` (the layout `assets generate` writes)."""
-    return Path(objects) / task / "model.urdf"
+    """The URDF of ``task``'s object in the object set ``objects`` (the layout `assets generate` writes); a
+    novel task's object is its name's directory (``glocal_ros.tasks.object_name``)."""
+    return Path(objects) / object_name(task) / "model.urdf"
 
 
 def ros_home() -> Path:

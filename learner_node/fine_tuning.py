@@ -32,7 +32,7 @@ import jax.numpy as jnp
 import numpy as np
 from flax.traverse_util import flatten_dict, unflatten_dict
 
-from glocal_ros.tasks import NUM_TASKS, task_index
+from glocal_ros.tasks import NUM_TASKS, one_hot_bit
 from learner_node.sac_settings import FineTuning
 
 #: A flattened parameter tree: path (("params", "Dense_0", "kernel"), ...) -> array.
@@ -79,7 +79,7 @@ def goal_start_actor(model, tuning: FineTuning, tasks: Sequence[str]):
 def _with_task_inputs(state, tuning: FineTuning, tasks: Sequence[str]):
     if tuning.new_task_inputs != "trained-mean":
         return state
-    bits = [task_index(task) for task in tasks]
+    bits = [one_hot_bit(task) for task in tasks]
     return _edited(state, lambda params, mu, nu: inherit_task_inputs(params, mu, nu, bits))
 
 

@@ -42,7 +42,7 @@ from rclpy.callback_groups import MutuallyExclusiveCallbackGroup, ReentrantCallb
 from rclpy.node import Node
 
 from glocal_ros.curriculum.learner import PAPER_EVAL_EPISODES, TrainGoal
-from glocal_ros.tasks import validate_tasks
+from glocal_ros.tasks import check_tasks
 from learner_node.evaluation import evaluate
 from learner_node.policies import PolicyExists, PolicyRegistry
 from learner_node.policy_store import PolicyStore, default_policy_dir
@@ -142,7 +142,7 @@ class LearnerNode(Node):
         episodes = request.episodes or PAPER_EVAL_EPISODES
         if not request.tasks:
             raise ValueError("no task to evaluate")
-        tasks = validate_tasks(request.tasks)
+        tasks = check_tasks(request.tasks)
         if len(set(tasks)) != len(tasks):
             raise ValueError(f"tasks repeat: {list(tasks)}")
         if episodes > self.max_eval_episodes:

@@ -75,7 +75,7 @@ from glocal_ros.curriculum.learner import EpisodeSummary, TrainGoal, passes_thre
 from glocal_ros.files import atomic_write
 from glocal_ros.seeds import MAX_SEED, derived_seed
 from glocal_ros.sim_contract import BatchStepper
-from glocal_ros.tasks import validate_tasks
+from glocal_ros.tasks import check_tasks
 from learner_node.evaluation import BatchPolicy, Score, evaluate
 from learner_node.fine_tuning import goal_start_actor, start_fine_tuning
 from learner_node.instruments import GoalInstruments, Instruments
@@ -110,8 +110,8 @@ def check_goal(goal: TrainGoal, max_eval_episodes: int = 1_000_000,
     """Raise ``ValueError`` with a message a user can act on, unless this learner can run ``goal``."""
     if not goal.task and not goal.episode_tasks:
         raise ValueError("a goal needs a task or episode_tasks")
-    validate_tasks([goal.task] if goal.task else [])
-    validate_tasks(list(goal.episode_tasks))
+    check_tasks([goal.task] if goal.task else [])
+    check_tasks(goal.episode_tasks)
     check_name(goal.initial_policy)
     check_name(goal.output_policy)
     if goal.initial_policy == RANDOM_POLICY:

@@ -16,7 +16,7 @@ from typing import TYPE_CHECKING, Callable, Protocol, Sequence
 import numpy as np
 
 from glocal_ros.sim_contract import PHASE_EVAL, PHASE_TRAIN, PHASES, UNSEEDED, EpisodeLog, FinishStep, StepBatch
-from glocal_ros.tasks import task_index
+from glocal_ros.tasks import check_task
 
 if TYPE_CHECKING:  # importing the batch must not load pybullet (workers and tests make their own envs)
     from sim_node.grasp_env import GraspState
@@ -72,7 +72,7 @@ def normalize_reset(
     per_env_seeds = _per_env([int(s) for s in seeds], len(indices), "seeds", default=UNSEEDED)
     for task in per_env_tasks:
         if task is not None:
-            task_index(task)
+            check_task(task)
     _check_phase(phase)
     return indices, per_env_tasks, per_env_seeds
 
@@ -97,7 +97,7 @@ def normalize_step(
         raise ValueError(f"next_tasks must be empty or have {stepped} entries, got {len(next_tasks)}")
     for task in next_tasks:
         if task:
-            task_index(task)
+            check_task(task)
     _check_phase(phase)
     return indices, np.clip(actions, -1.0, 1.0).reshape(stepped, action_dim), list(next_tasks) or [""] * stepped
 
@@ -144,7 +144,7 @@ class BatchedEnvs:
     ):
         if num_envs < 1:
             raise ValueError(f"num_envs must be at least 1, got {num_envs}")
-        task_index(initial_task)
+        check_task(initial_task)
         self.first_index = first_index
         self.envs = [make_env(first_index + i) for i in range(num_envs)]
         self.obs_dim = int(np.prod(self.envs[0].observation_space.shape))

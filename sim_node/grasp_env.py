@@ -34,7 +34,7 @@ in the world axes with the origin at ``OBJECT_SPOT`` on the table top (see
 ====== ====================================================================
 index  meaning
 ====== ====================================================================
-0..48  one-hot task, bit ``task_index(task)``
+0..48  one-hot task, bit ``one_hot_bit(task)`` (a novel object's: its proxy's)
 49..51 TCP position
 52, 53 sin, cos of the gripper yaw
 54     gripper opening (0 closed .. 0.08 open)
@@ -68,7 +68,7 @@ from pybullet_utils.bullet_client import BulletClient
 from glocal_ros.paths import object_urdf
 from glocal_ros.sim_contract import DEFAULT_EPISODE_STEPS, GRASP_ENV_ID
 from glocal_ros.spaces import ACTION_DIM, OBS_DIM, PHYSICS_TIMESTEP, SUBSTEPS
-from glocal_ros.tasks import NUM_TASKS, PRIOR_TASK, task_index
+from glocal_ros.tasks import NUM_TASKS, PRIOR_TASK, check_task, one_hot_bit
 from sim_node.grasp_world import OBJECT_SPOT, TABLE_TOP_Z, GraspWorld
 from sim_node.panda_robot import FINGER_MAX_POSITION, JOINT_NAMES, yaw_of
 from sim_node.physics_client import PhysicsClient
@@ -170,13 +170,14 @@ def _observation_bounds(config: GraspEnvConfig) -> tuple[np.ndarray, np.ndarray]
 class GraspEnv(gym.Env[np.ndarray, np.ndarray]):
     """Grasp the object of one task; the task can change at every reset.
 
-    :param task: the task (object) of the first episode, ``A0`` .. ``G6``.
+    :param task: the task (object) of the first episode, ``A0`` .. ``G6``, or a novel object's
+        ``NAME@PROXY`` (``glocal_ros.tasks``).
     :param objects_dir: holds ``<task>/model.urdf`` for every task used;
         defaults to the package's ``assets/objects``.
     :param config: parameters, ``GraspEnvConfig()`` when omitted.
     :param render_mode: ``None``, ``"human"`` (PyBullet GUI; one per process)
         or ``"rgb_array"``.
-    :raises UnknownTaskError: when ``task`` is not on the A0..G6 grid.
+    :raises UnknownTaskError: when ``task`` is neither on the A0..G6 grid nor a novel task.
     :raises FileNotFoundError: when the task's URDF is missing.
 
     ``world`` (a ``GraspWorld``) exposes the simulator's privileged state,
@@ -193,7 +194,7 @@ class GraspEnv(gym.Env[np.ndarray, np.ndarray]):
         config: GraspEnvConfig | None = None,
         render_mode: str | None = None,
     ):
-        task_index(task)
+        check_task(task)
         if render_mode is not None and render_mode not in self.metadata["render_modes"]:
             modes = self.metadata["render_modes"]
             raise ValueError(f"render_mode must be one of {modes} or None, got {render_mode!r}")
@@ -277,7 +278,7 @@ class GraspEnv(gym.Env[np.ndarray, np.ndarray]):
             if unknown:
                 raise ValueError(f"unknown reset options {sorted(unknown)}; only 'task' is accepted")
             task = options.get("task", task)
-            task_index(task)
+            check_task(task)
         if task != self.world.object.task:
             self.world.load_object(task, self._urdf_path(task))
         self._task = task
@@ -346,7 +347,7 @@ class GraspEnv(gym.Env[np.ndarray, np.ndarray]):
         self._state = GraspState(left, right, opening, lift, self._steps)
 
         observation = np.zeros(OBS_DIM, dtype=np.float64)
-        observation[task_index(self._task)] = 1.0
+        observation[one_hot_bit(self._task)] = 1.0
         observation[OBS_GRIPPER_POSITION] = tcp - self._origin
         observation[OBS_GRIPPER_YAW] = (math.sin(yaw), math.cos(yaw))
         observation[OBS_GRIPPER_OPENING] = opening

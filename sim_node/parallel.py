@@ -19,7 +19,7 @@ from typing import Sequence
 import numpy as np
 
 from glocal_ros.sim_contract import PHASE_TRAIN, FinishStep, StepBatch
-from glocal_ros.tasks import task_index
+from glocal_ros.tasks import check_task
 from sim_node.batch import BatchedEnvs, EnvSnapshot, normalize_reset, normalize_step
 from sim_node.grasp_env import GraspEnv, GraspEnvConfig
 
@@ -60,7 +60,7 @@ class ProcessBatchedEnvs:
 
     def __init__(self, num_envs: int, workers: int, initial_task: str, objects_dir: str,
                  config: GraspEnvConfig, gui: bool = False, seed: int | None = None, first_index: int = 0):
-        task_index(initial_task)  # a clear error here, not a worker dying at start-up
+        check_task(initial_task)  # a clear error here, not a worker dying at start-up
         self.first_index = first_index
         context = mp.get_context("spawn")
         self.shares = split(num_envs, workers)

@@ -79,7 +79,8 @@ class SimNode(Node):
         num_envs = declare(self, "num_envs", 4, "envs stepped in lockstep per /sim/step call", min_value=1, max_value=256)
         initial_task = declare(self, "initial_task", "A0", "task of every env until a reset names another")
         gui = declare(self, "gui", False, "open the PyBullet window for env 0")
-        objects = declare(self, "objects_dir", "", "folder of <TASK>/model.urdf objects; empty: the package's assets")
+        objects = declare(self, "objects_dir", "", "folder of <TASK>/model.urdf objects (a novel task NAME@PROXY's: "
+                          "NAME/model.urdf); empty: the package's assets")
         max_steps = declare(self, "max_steps", GraspEnvConfig.max_steps, "T: steps per episode before truncation",
                             min_value=1, max_value=10_000)
         self.viewer_env = declare(self, "viewer_env", 0, "env whose state is published for viewers",

@@ -1,6 +1,6 @@
 """An honest test double of the learner for curriculum tests: no ROS, no RL.
 
-Every task has a hidden difficulty; a policy is its competence on every task
+Every task has a hidden difficulty (a novel object, ``NAME@PROXY``, is its proxy's task); a policy is its competence on every task
 (the chance that one evaluation episode succeeds). Training on a task raises
 competence on it at a rate that grows with the competence already there
 and shrinks with difficulty, and spills over to grid neighbours: so the
@@ -17,7 +17,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from glocal_ros.curriculum.learner import EpisodeSummary, TrainGoal, TrainResult
-from glocal_ros.tasks import ALL_TASKS, grid_coordinates, task_index
+from glocal_ros.tasks import ALL_TASKS, grid_coordinates, grid_task, one_hot_bit, task_index
 
 
 def grid_difficulty(task: str) -> float:
@@ -44,7 +44,7 @@ class SimulatedLearner:
         self.calls.append(("evaluate", (policy, tuple(tasks))))
         competence = self._policy(policy)
         rng = self._rng if seed is None else np.random.default_rng(seed)
-        return {t: float(rng.binomial(episodes, competence[task_index(t)])) for t in tasks}
+        return {t: float(rng.binomial(episodes, competence[one_hot_bit(t)])) for t in tasks}
 
     def train(self, request: TrainGoal) -> TrainResult:
         self.calls.append(("train", request))
@@ -57,7 +57,7 @@ class SimulatedLearner:
         chunk = request.eval_interval or budget
         steps, score, learned, episodes = 0, -1.0, False, []
         if request.task and request.stop_when_learned:  # "until S > B" checks first, as the learner does
-            score = float(rng.binomial(request.eval_episodes, competence[task_index(request.task)]))
+            score = float(rng.binomial(request.eval_episodes, competence[one_hot_bit(request.task)]))
             learned = score > request.threshold
         limit = request.episode_limit or math.inf
         while steps < budget and not (learned and request.stop_when_learned) and len(episodes) < limit:
@@ -72,7 +72,7 @@ class SimulatedLearner:
             episodes += new
             steps += chunk_steps
             if request.task:
-                score = float(rng.binomial(request.eval_episodes, competence[task_index(request.task)]))
+                score = float(rng.binomial(request.eval_episodes, competence[one_hot_bit(request.task)]))
                 learned = score > request.threshold
         self.policies[request.output_policy] = competence
         return TrainResult(learned, score, steps, tuple(episodes))
@@ -89,6 +89,7 @@ class SimulatedLearner:
         return self.policies[name]
 
     def _practise(self, competence: np.ndarray, task: str, steps: float) -> None:
+        task = grid_task(task)  # a novel object is, to the double, the task whose bit it borrows
         index = task_index(task)
         rate = self.learn_rate * (1 - self.difficulty[task]) ** 2 * (competence[index] + 0.02)
         gain = (1 - competence[index]) * (1 - math.exp(-rate * steps))
@@ -104,7 +105,7 @@ class SimulatedLearner:
         while used < steps and len(episodes) < most:
             task = tasks[turn % len(tasks)]
             turn += 1
-            success = bool(rng.random() < competence[task_index(task)])
+            success = bool(rng.random() < competence[one_hot_bit(task)])
             length = min(int(rng.integers(15, 30)) if success else self.max_episode_steps, steps - used)
             used += length
             episodes.append(EpisodeSummary(task, -float(length), length, success))

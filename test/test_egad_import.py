@@ -195,3 +195,36 @@ def test_a_best_pose_below_the_rule_is_a_warning_for_an_imported_set_and_kept_wh
     assert stored.objects["A0"].best_pose_success == measured["objects"]["A0"]["best_pose_success"], \
         "the same seed measures the same"
     assert not refused_measurements_path(out).exists()
+
+
+def test_a_novel_object_is_prepared_as_a_set_of_one_from_a_mesh_or_another_sets_object(tmp_path: Path) -> None:
+    from glocal_ros.objects.pipeline import prepare_object
+    from glocal_ros.paths import objects_dir
+
+    mesh = tmp_path / "crate.obj"
+    trimesh.creation.box((30.0, 40.0, 50.0)).export(mesh)
+    out = tmp_path / "out"
+    metadata = prepare_object(mesh, "crate", out, config=FAST)
+    assert ObjectSetMetadata.load(out) == metadata and list(metadata.objects) == ["crate"]
+    assert metadata.source == "novel" and metadata.objects["crate"].source_file == str(mesh.resolve())
+    assert max(metadata.objects["crate"].extents) == pytest.approx(0.08)  # scaled into the gripper as the set is
+    env = GraspEnv("crate@D2", objects_dir=out)
+    try:
+        env.reset(seed=0)
+    finally:
+        env.close()
+
+    copied = prepare_object(objects_dir() / "C4", "c4_again", tmp_path / "copy")
+    assert copied.objects["c4_again"].difficulty == ObjectSetMetadata.load(objects_dir()).objects["C4"].difficulty
+    assert (tmp_path / "copy" / "c4_again" / "collision.obj").read_bytes() == (
+        objects_dir() / "C4" / "collision.obj").read_bytes()
+
+    before = _snapshot(out)
+    (tmp_path / "empty").mkdir()
+    with pytest.raises(BadMeshError, match="not an object directory"):
+        prepare_object(tmp_path / "empty", "crate", out)
+    with pytest.raises(BadMeshError, match="no such file"):
+        prepare_object(tmp_path / "missing.obj", "crate", out)
+    with pytest.raises(ValueError, match="collides with grid task A1"):
+        prepare_object(mesh, "a1", out)
+    assert _snapshot(out) == before

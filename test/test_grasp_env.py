@@ -132,6 +132,17 @@ def test_one_hot_follows_the_task(make_env) -> None:
     assert len(observation[OBS_TASK]) == NUM_TASKS
 
 
+def test_a_novel_object_loads_from_its_name_and_shows_its_proxys_bit(make_env, objects_dir: Path) -> None:
+    write_object(objects_dir, "crate", '<box size="0.04 0.05 0.06"/>', (5e-5, 4.3e-5, 3.4e-5))
+    env = make_env(task="crate@C4")
+    under_c4, info = env.reset(seed=3)
+    assert info["task"] == "crate@C4" and env.world.object.urdf == objects_dir / "crate" / "model.urdf"
+    assert under_c4[OBS_TASK].sum() == 1.0 and under_c4[task_index("C4")] == 1.0
+    under_a0, _ = env.reset(seed=3, options={"task": "crate@A0"})
+    assert under_a0[task_index("A0")] == 1.0
+    np.testing.assert_array_equal(under_a0[OBS_TASK.stop:], under_c4[OBS_TASK.stop:])  # only the bit differs
+
+
 def test_task_switch_persists_over_later_resets(make_env) -> None:
     env = make_env()
     env.reset(seed=0, options={"task": CYLINDER_TASK})

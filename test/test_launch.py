@@ -7,11 +7,14 @@ meets a node another test started. test_namespace.py runs one on a domain
 given explicitly.
 """
 
+import json
 import os
 import signal
+import shutil
 import subprocess
 import sys
 import time
+from pathlib import Path
 
 import pytest
 from rosbags.highlevel import AnyReader
@@ -54,7 +57,18 @@ def sim_stamps(bag) -> dict[str, list[int]]:
     }
 
 
-def test_runs_are_recorded_reported_repeated_and_replayed(tmp_path):
+@pytest.fixture(scope="module")
+def smoke_experiment(tmp_path_factory) -> tuple[Path, list[str]]:
+    """One experiment, random and glocal, seed 5, on sim time; its directory and its command."""
+    out = tmp_path_factory.mktemp("smoke-experiment") / "experiment"
+    command = [*CLI, "experiment", "--strategies", "random,glocal", "--seeds", "5", "--preset", "smoke",
+               "--use-sim-time", "--out", str(out)]
+    result = subprocess.run(command, capture_output=True, text=True, timeout=900, cwd=REPO, env=graph_env())
+    assert result.returncode == 0, result.stdout + result.stderr
+    return out, command
+
+
+def test_runs_are_recorded_reported_repeated_and_replayed(smoke_experiment, tmp_path):
     """One experiment (random and glocal, seed 5, on sim time), then one launch of its glocal run again.
 
     - The experiment records each run and one report; the same command again skips both, finished.
@@ -65,11 +79,7 @@ def test_runs_are_recorded_reported_repeated_and_replayed(tmp_path):
     - The same launch again replays the finished run from its journal (no goal is sent); another seed
       in its directory is refused.
     """
-    out = tmp_path / "experiment"
-    command = [*CLI, "experiment", "--strategies", "random,glocal", "--seeds", "5", "--preset", "smoke",
-               "--use-sim-time", "--out", str(out)]
-    result = subprocess.run(command, capture_output=True, text=True, timeout=900, cwd=REPO, env=graph_env())
-    assert result.returncode == 0, result.stdout + result.stderr
+    out, command = smoke_experiment
     for run in ("random-seed5", "glocal-seed5"):
         assert (out / run / "bag" / "metadata.yaml").is_file()
     report = (out / "report" / "report.md").read_text()
@@ -112,6 +122,81 @@ def test_runs_are_recorded_reported_repeated_and_replayed(tmp_path):
 
     again = subprocess.run(command, capture_output=True, text=True, timeout=120, cwd=REPO, env=graph_env())
     assert again.returncode == 0 and again.stdout.count("finished before") == 2, again.stdout
+
+
+@pytest.mark.timeout(900)  # run alone, it makes the experiment too
+def test_adapt_refuses_what_it_cannot_use_and_adapts_a_runs_policies_to_a_generated_object(smoke_experiment,
+                                                                                           tmp_path):
+    """`glocal-ros adapt` (issue 46) on the experiment's finished runs: refusals before anything starts, the run
+    directory unchanged; then the glocal run's policies adapted to a generated object through the graph (the
+    issue's target, under 2 minutes on 2 cores, is printed, not asserted: a loaded machine is slower)."""
+    from glocal_ros.objects.pipeline import GeneratorConfig, candidate_mesh
+
+    experiment, _ = smoke_experiment
+    glocal, random_run = experiment / "glocal-seed5", experiment / "random-seed5"
+    mesh = tmp_path / "novel.obj"
+    candidate_mesh(20261207, 0, GeneratorConfig())[1].export(mesh)  # a seed the committed set did not use
+    junk = tmp_path / "junk.obj"
+    junk.write_text("this is not a mesh\n")
+    unfinished = tmp_path / "unfinished"
+    shutil.copytree(glocal, unfinished, ignore=shutil.ignore_patterns("bag*", "tensorboard", "logs", "report"))
+    state = json.loads((unfinished / "curriculum" / "state.json").read_text())
+    (unfinished / "curriculum" / "state.json").write_text(json.dumps({**state, "status": 1}))
+
+    def adapt(run: Path, source: Path, name: str, timeout: float = 120) -> subprocess.CompletedProcess:
+        return subprocess.run([*CLI, "adapt", str(run), "--object", str(source), "--name", name, "--budget", "60"],
+                              capture_output=True, text=True, timeout=timeout, cwd=REPO, env=graph_env())
+
+    refusals = [(random_run, mesh, "blob", "random-seed5 holds no global policy"),
+                (unfinished, mesh, "blob", "the run is not finished"),
+                (glocal, mesh, "c4", "collides with grid task C4"),
+                (glocal, junk, "blob", "junk.obj: the mesh is empty")]
+    for run, source, name, message in refusals:
+        before = sorted(path.relative_to(run) for path in run.rglob("*"))
+        refused = adapt(run, source, name)
+        assert refused.returncode == 2 and message in refused.stderr, (message, refused.stderr)
+        assert sorted(path.relative_to(run) for path in run.rglob("*")) == before, message
+
+    started = time.monotonic()
+    adapted = adapt(glocal, mesh, "blob", timeout=600)
+    elapsed = time.monotonic() - started
+    assert adapted.returncode == 0, adapted.stdout + adapted.stderr
+    result = json.loads((glocal / "adapt" / "blob" / "adapt.json").read_text())
+    globals_ = sorted(path.name for path in (glocal / "policies").glob("glocal-seed5.G*"))
+    candidates = [candidate["policy"] for candidate in result["candidates"]]
+    assert candidates[:len(globals_)] == globals_ and candidates[-1] == "prior", candidates
+    best = max(candidate["score"] for candidate in result["candidates"])
+    assert result["chosen"]["policy"] == next(c["policy"] for c in result["candidates"] if c["score"] == best)
+    assert result["task"] == f"blob@{result['chosen']['proxy']}" and result["steps_used"] <= 60
+    assert (glocal / "policies" / "glocal-seed5.adapt-blob" / "policy.json").is_file()
+    assert "into glocal-seed5.adapt-blob" in adapted.stdout
+    bag = glocal / "adapt" / "blob" / "bag"
+    evaluations = read(bag, "/glocal/evaluations")
+    scored = {(e.policy, s.task) for e in evaluations for s in e.scores}
+    assert {(c["policy"], f"blob@{c['proxy']}") for c in result["candidates"]} <= scored
+    check = episode_sequence(bag)
+    assert check.ok and check.count > 0, check.summary()
+    print(f"adapt: {elapsed:.0f} s")  # the issue's target: under 2 minutes on 2 cores
+    again = adapt(glocal, mesh, "blob")
+    assert again.returncode == 2 and "adapted to an object named 'blob' already" in again.stderr
+
+    # bench fewshot's case on the same run: the candidates scored in-process, a goal per arm, starts shared
+    from glocal_app.benches.fewshot import ARMS, fewshot_report, novel_objects, read_run, run_case
+    from glocal_app.benches.transfer import TransferSettings
+    from glocal_ros.paths import objects_dir
+
+    run = read_run(glocal)
+    assert run.profile == "glocal_ros" and [c.policy for c in run.candidates] == candidates
+    settings = TransferSettings(step_budget=40, eval_interval=20, eval_episodes=2, num_envs=2)
+    case = run_case(run, novel_objects(objects_dir(), per_third=1)[0], 0, settings)
+    assert [policy for policy, _, _ in case.scores] == candidates and set(case.goals) == set(ARMS)
+    best = max(score for _, _, score in case.scores)
+    assert case.chosen == next(policy for policy, _, score in case.scores if score == best)
+    starts = {arm: goal.prior for arm, goal in case.goals.items()}
+    assert starts["adapt's choice"] == case.chosen and starts["prior"] == "prior"
+    assert (case.goals["adapt's choice"] is case.goals["prior"]) == (case.chosen == "prior")
+    report = fewshot_report([case], "bench fewshot", settings, objects_dir())
+    assert "| glocal-seed5 | glocal_ros | hard | 1 |" in report and case.object.name in report
 
 
 def test_ctrl_c_leaves_a_valid_bag_and_the_same_command_resumes(tmp_path):

@@ -1,7 +1,9 @@
 import pytest
 
 from glocal_ros.tasks import (
-    ALL_TASKS, NUM_TASKS, UnknownTaskError, grid_coordinates, parse_task_list, sorted_tasks, task_index,
+    ALL_TASKS, NUM_TASKS, UnknownTaskError, check_novel_name, check_task, grid_coordinates, grid_task,
+    novel_task, object_name, one_hot_bit, parse_task_list, sorted_tasks, split_novel_task, task_index,
+    validate_tasks,
 )
 
 
@@ -23,3 +25,22 @@ def test_parse_task_list():
 
 def test_sorted_tasks_uses_grid_order():
     assert sorted_tasks(["B0", "A6", "A1"]) == ["A1", "A6", "B0"]
+
+
+def test_a_novel_object_is_served_under_its_proxys_bit_and_never_in_a_curriculums_set():
+    task = novel_task("mug_2", "C4")
+    assert task == "mug_2@C4" and split_novel_task(task) == ("mug_2", "C4")
+    assert check_task(task) == task and check_task("B3") == "B3"
+    assert one_hot_bit(task) == task_index("C4") and grid_task(task) == "C4" and grid_task("B3") == "B3"
+    assert object_name(task) == "mug_2" and object_name("B3") == "B3"
+    assert split_novel_task("B3") is None and split_novel_task("mug@H9") is None
+    with pytest.raises(UnknownTaskError, match="NAME@A0..G6"):
+        check_task("mug")
+    for refused, message in (("b3@A0", "collides with grid task B3"), ("2mug@A0", "invalid object name"),
+                             ("mug@H9", "unknown task 'H9'"), ("mug@", "unknown task ''")):
+        with pytest.raises(UnknownTaskError, match=message):
+            check_task(refused)
+    with pytest.raises(UnknownTaskError, match="collides with grid task G6"):
+        check_novel_name("g6")
+    with pytest.raises(UnknownTaskError):
+        validate_tasks([task])  # a run's task set is the grid

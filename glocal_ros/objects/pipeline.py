@@ -29,7 +29,7 @@ import contextlib
 import json
 import shutil
 import tempfile
-from dataclasses import asdict, dataclass, field
+from dataclasses import asdict, dataclass, field, replace
 from pathlib import Path
 from typing import Callable, Iterator, Mapping, Optional, Sequence
 
@@ -75,7 +75,7 @@ from glocal_ros.objects.physics import (
 )
 from glocal_ros.objects.render import render_contact_sheet
 from glocal_ros.objects.repair import MeshRepair, UnrepairableMeshError, repair_mesh
-from glocal_ros.tasks import ALL_TASKS, validate_tasks
+from glocal_ros.tasks import ALL_TASKS, check_novel_name, validate_tasks
 
 GENERATOR_VERSION = "2.0.0"
 
@@ -648,4 +648,48 @@ def import_egad(
         metadata.save(staging)
         if contact_sheet:
             render_contact_sheet(staging, staging / "contact_sheet.png")
+    return metadata
+
+
+#: The files of one object's directory, as ``_write_object`` writes them.
+OBJECT_FILES = ("model.urdf", "visual.obj", "collision.obj")
+
+
+def prepare_object(source: Path, name: str, out_dir: Path, config: GeneratorConfig = GeneratorConfig(),
+                   seed: int = 0) -> ObjectSetMetadata:
+    """One object outside the set, as ``<out_dir>/<name>/`` and ``<out_dir>/objects.json``: a set of one.
+
+    ``source`` is a mesh file, which goes through the importer's steps (``load_mesh``'s checks and repair,
+    complexity, decimation, gripper scaling, grasp difficulty, V-HACD, URDF; the grasp sampling seeded by
+    ``seed``), or an object directory another set holds (``assets generate``, ``assets import-egad``), whose
+    files are taken as they are, with its metrics from that set's ``objects.json`` when it has them. ``name``
+    must be a novel object's (``glocal_ros.tasks.check_novel_name``). Staged as ``import_egad`` is: a mesh
+    that cannot be prepared raises ``BadMeshError`` and ``out_dir`` stays as it was.
+    """
+    check_novel_name(name)
+    source = Path(source)
+    metadata = ObjectSetMetadata(generator_version=GENERATOR_VERSION, source="novel", config=config.to_dict(),
+                                 binning={"method": "one object outside the set, no grid position"})
+    if source.is_dir():
+        missing = [file for file in OBJECT_FILES if not (source / file).is_file()]
+        if missing:
+            raise BadMeshError(f"{source}: not an object directory (no {', '.join(missing)}); give a mesh file "
+                               f"or a directory of a set that `assets generate` or `assets import-egad` wrote")
+        with staged(out_dir) as staging:
+            (staging / name).mkdir()
+            for file in OBJECT_FILES:
+                shutil.copy2(source / file, staging / name / file)
+            known = ObjectSetMetadata.load(source.parent).objects if (source.parent / "objects.json").is_file() else {}
+            if source.name in known:
+                metadata.objects[name] = replace(known[source.name], task=name, source_file=str(source.resolve()))
+            metadata.save(staging)
+        return metadata
+    loaded = load_mesh(source)
+    with staged(out_dir) as staging:
+        measured = _measure(loaded.solid, np.random.default_rng([seed, 1]), config,
+                            as_given=loaded.given if loaded.repair else None)
+        metadata.objects[name] = _write_object(name, measured, staging, config, source="novel",
+                                               source_file=str(source.resolve()),
+                                               repair=loaded.repair.to_dict() if loaded.repair else None)
+        metadata.save(staging)
     return metadata

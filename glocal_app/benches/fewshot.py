@@ -1,0 +1,244 @@
+"""``glocal-ros bench fewshot``: novel objects learned from a run's global policy, from the prior, from its last policy.
+
+The paper's closing claim, measured: a finished GloCAL run's global policies
+are a better start on objects outside the set than the prior. For each run
+(a finished run directory that kept its policies), each novel object and each
+seed, in-process (``bench transfer``'s ``run_goal``: a ``Trainer`` on envs of
+its own, the run's learner profile and its fine-tuning):
+
+- every candidate of ``glocal_ros.adaptation.run_candidates`` (the run's
+  global policies, its last policy, the prior) is scored on the object, each
+  under its own task's bit (``NAME@PROXY``), on the same seeded episodes; the
+  candidate ``adapt`` would start from is ``choose``'s;
+- three goals, each stopped at its first score above B or at the budget:
+  from adapt's choice, from the prior and from the run's last policy (an arm
+  whose start is another's reuses that goal: same start, task and seed give
+  the same goal).
+
+The objects: a set that ``assets generate`` made with a seed the committed set
+did not use, its lifting-pose shares measured (``assets lifting-poses``);
+``per_third`` objects from each third of its shares (the share sorted low to
+high: hard to easy), evenly spaced in the third, each named ``<set>_<TASK>``
+(``glocal_ros.tasks``: a novel object's name) and prepared as ``adapt``
+prepares an object directory (``prepare_object``).
+"""
+
+from __future__ import annotations
+
+import math
+import os
+import statistics
+import sys
+import tempfile
+import time
+from dataclasses import dataclass, replace
+from pathlib import Path
+from typing import Callable, Sequence
+
+from glocal_app.benches.transfer import PROFILE_RECIPE, TransferGoal, TransferSettings
+
+#: The arms: where a goal starts.
+ARMS = ("adapt's choice", "prior", "last")
+THIRDS = ("hard", "middle", "easy")
+
+
+@dataclass(frozen=True)
+class FewshotRun:
+    """A finished run as the bench uses it: its id, profile, store and candidates."""
+
+    path: Path
+    run_id: str
+    profile: str
+    candidates: tuple  # glocal_ros.adaptation.Candidate, in run_candidates' order
+
+
+@dataclass(frozen=True)
+class NovelObject:
+    name: str
+    source: Path  # the object directory of the generated set
+    lifting_pose_share: float
+    third: str
+
+
+@dataclass(frozen=True)
+class FewshotCase:
+    """One run, object and seed: every candidate's score, adapt's choice, and the goal of each arm."""
+
+    run: str
+    profile: str
+    object: NovelObject
+    seed: int
+    scores: tuple[tuple[str, str, float], ...]  # (policy, proxy, score), in the candidates' order
+    chosen: str
+    goals: dict  # arm -> TransferGoal
+
+
+def read_run(run_dir: Path) -> FewshotRun:
+    """``ValueError`` unless ``run_dir`` is a finished run whose policies hold a global one."""
+    from glocal_app.adapt import run_profile, run_summary, stored_tasks
+    from glocal_ros.adaptation import run_candidates
+
+    options, run = run_summary(Path(run_dir))
+    candidates = run_candidates(run["run_id"], run["strategy"], stored_tasks(Path(run_dir) / "policies"),
+                                run.get("current_policy", ""), run["initial_policy"])
+    return FewshotRun(Path(run_dir), run["run_id"], run_profile(options), tuple(candidates))
+
+
+def novel_objects(objects_dir: Path, per_third: int = 3, prefix: str | None = None) -> list[NovelObject]:
+    """``per_third`` objects from each third of the set's lifting-pose shares; ``ValueError`` if unmeasured."""
+    from glocal_ros.objects import ObjectSetMetadata
+    from glocal_ros.tasks import sorted_tasks
+
+    metadata = ObjectSetMetadata.load(objects_dir)
+    shares = {task: o.lifting_pose_share for task, o in metadata.objects.items()}
+    unmeasured = [task for task, share in shares.items() if share is None]
+    if unmeasured:
+        raise ValueError(f"{objects_dir}: no lifting-pose share for {', '.join(sorted_tasks(unmeasured))}: "
+                         f"run `glocal-ros assets lifting-poses --out {objects_dir}` first")
+    if per_third < 1 or 3 * per_third > len(shares):
+        raise ValueError(f"{per_third} objects per third of {len(shares)}: need 1 to {len(shares) // 3}")
+    ranked = sorted(shares, key=lambda task: (shares[task], task))
+    prefix = prefix or ("novel" if metadata.seed is None else f"seed{metadata.seed}")
+    chosen = []
+    for third, name in enumerate(THIRDS):
+        members = ranked[third * len(ranked) // 3:(third + 1) * len(ranked) // 3]
+        picks = [members[round((k + 0.5) * len(members) / per_third - 0.5)] for k in range(per_third)]
+        chosen += [NovelObject(f"{prefix}_{task}", Path(objects_dir) / task, shares[task], name) for task in picks]
+    return chosen
+
+
+def score_candidates(run: FewshotRun, novel: NovelObject, objects: Path, seed: int, settings: TransferSettings
+                     ) -> list[tuple[str, str, float]]:
+    """Every candidate's successes on the object under its own bit, on adapt's seeded episodes, in-process."""
+    from glocal_app.benches.transfer import prior_stores
+    from glocal_ros.adaptation import EVALUATION_STREAM
+    from glocal_ros.seeds import derived_seed
+    from glocal_ros.tasks import novel_task
+    from learner_node.evaluation import evaluate
+    from learner_node.policies import PolicyRegistry
+    from learner_node.policy_store import PolicyStore
+    from learner_node.profiles import learner_profile
+    from learner_node.training import Trainer
+    from sim_node.batch import BatchedEnvs
+    from sim_node.grasp_env import GraspEnv
+
+    tasks = [novel_task(novel.name, candidate.proxy) for candidate in run.candidates]
+    envs = BatchedEnvs(lambda i: GraspEnv(tasks[0], objects), settings.num_envs, tasks[0])
+    try:
+        with tempfile.TemporaryDirectory(prefix="glocal-bench-fewshot-") as work:
+            policies = PolicyRegistry(PolicyStore(Path(work) / "policies"),
+                                      prior_stores(run.path / "policies", run.profile))
+            trainer = Trainer(envs, policies, Path(work) / "checkpoints", profile=learner_profile(run.profile))
+            scores = []
+            for candidate, task in zip(run.candidates, tasks):
+                (score,) = evaluate(envs, trainer.evaluation_policy(candidate.policy, [task]), [task],
+                                    settings.eval_episodes, seed=derived_seed(seed, EVALUATION_STREAM))
+                scores.append((candidate.policy, candidate.proxy, float(score.successes)))
+            return scores
+    finally:
+        envs.close()
+
+
+def run_case(run: FewshotRun, novel: NovelObject, seed: int, settings: TransferSettings,
+             log: Callable[[str], None] = print) -> FewshotCase:
+    """One run, object and seed: the candidates scored, then a goal per arm (shared where their starts are)."""
+    from glocal_app.benches.transfer import run_goal
+    from glocal_ros.adaptation import Candidate, choose
+    from glocal_ros.objects.pipeline import prepare_object
+    from glocal_ros.tasks import novel_task
+
+    with tempfile.TemporaryDirectory(prefix="glocal-bench-fewshot-objects-") as work:
+        objects = Path(work) / "objects"
+        prepare_object(novel.source, novel.name, objects)
+        scores = score_candidates(run, novel, objects, seed, settings)
+        by_policy = {candidate.policy: candidate for candidate in run.candidates}
+        chosen = choose([(by_policy[policy], score) for policy, _, score in scores])
+        starts = {"adapt's choice": chosen,
+                  "prior": next(c for c in run.candidates if "prior" in c.roles),
+                  "last": next((c for c in run.candidates if "last" in c.roles), None)}
+        goal_settings = replace(settings, objects_dir=objects, stop_at_threshold=True)
+        ran: dict[Candidate, TransferGoal] = {}
+        goals = {}
+        for arm, start in starts.items():
+            if start is None:
+                continue
+            if start not in ran:
+                ran[start] = run_goal(PROFILE_RECIPE, start.policy, novel_task(novel.name, start.proxy), seed,
+                                      goal_settings, prior_store=run.path / "policies", profile=run.profile)
+            goals[arm] = ran[start]
+    case = FewshotCase(run.run_id, run.profile, novel, seed, tuple(scores), chosen.policy, goals)
+    log(_case_line(case))
+    return case
+
+
+def _steps(goal: TransferGoal | None) -> str:
+    return "-" if goal is None else "never" if goal.steps_to_b is None else str(goal.steps_to_b)
+
+
+def _case_line(case: FewshotCase) -> str:
+    return (f"{case.run} {case.object.name} ({case.object.third}) seed {case.seed}: chose {case.chosen}; steps to "
+            f"B " + ", ".join(f"{arm} {_steps(case.goals.get(arm))}" for arm in ARMS))
+
+
+def run_fewshot_bench(run_dirs: Sequence[Path], objects_dir: Path, seeds: Sequence[int], settings: TransferSettings,
+                      per_third: int = 3, log: Callable[[str], None] = print) -> list[FewshotCase]:
+    """Every run x object x seed (``ValueError`` before any goal for a run or a set it cannot use)."""
+    settings.check()
+    runs = [read_run(path) for path in run_dirs]
+    objects = novel_objects(objects_dir, per_third)
+    if not seeds or len(set(seeds)) != len(seeds):
+        raise ValueError(f"seeds must be given once each, got {list(seeds)}")
+    return [run_case(run, novel, seed, settings, log) for run in runs for novel in objects for seed in seeds]
+
+
+def _median(values: Sequence[float]) -> str:
+    if not values:
+        return "-"
+    median = statistics.median(values)
+    return "never" if math.isinf(median) else f"{median:.0f}"
+
+
+def fewshot_report(cases: Sequence[FewshotCase], command: str, settings: TransferSettings, objects_dir: Path) -> str:
+    """The table: median steps to B per arm and difficulty third, then every case."""
+    runs = list(dict.fromkeys((case.run, case.profile) for case in cases))
+    lines = [
+        "# bench fewshot: novel objects from a run's global policies, from the prior, from its last policy",
+        "",
+        f"Command: `{command}`  ",
+        f"{time.strftime('%Y-%m-%d %H:%M')}, Python {sys.version.split()[0]}, {os.cpu_count()} CPU cores, "
+        f"load average at the end {os.getloadavg()[0]:.1f} (the machine is shared). Objects from `{objects_dir}`, "
+        f"by thirds of their lifting-pose shares (hard: the lowest). Per run, object and seed: every candidate "
+        f"scored on the object under its own task's bit over {settings.eval_episodes} seeded episodes, then one "
+        f"Train goal per arm on {settings.num_envs} envs, scored every {settings.eval_interval} steps, stopped at "
+        f"its first score above B = {settings.threshold:g} or at {settings.step_budget} steps. Steps to B: 0 for a "
+        f"start already above B; a goal that never passed counts as slower than all in a median.",
+        "",
+        "| run | profile | third | cases | " + " | ".join(f"median steps to B from {arm}" for arm in ARMS)
+        + " | " + " | ".join(f"passed from {arm}" for arm in ARMS) + " |",
+        "| --- | --- | --- | ---: | " + " | ".join(["---:"] * 2 * len(ARMS)) + " |",
+    ]
+    for run, profile in runs:
+        for third in (*THIRDS, "all"):
+            mine = [c for c in cases if c.run == run and (third == "all" or c.object.third == third)]
+            if not mine:
+                continue
+            medians = [_median([math.inf if c.goals[arm].steps_to_b is None else c.goals[arm].steps_to_b
+                                for c in mine if arm in c.goals]) for arm in ARMS]
+            passed = [f"{sum(c.goals[arm].steps_to_b is not None for c in mine if arm in c.goals)} of "
+                      f"{sum(arm in c.goals for c in mine)}" for arm in ARMS]
+            lines.append(f"| {run} | {profile} | {third} | {len(mine)} | " + " | ".join(medians) + " | "
+                         + " | ".join(passed) + " |")
+    lines += ["", "Every case (scores out of "
+              f"{settings.eval_episodes}; `*` adapt's choice):", "",
+              "| run | object | lifting poses | third | seed | candidates | "
+              + " | ".join(f"steps to B from {arm}" for arm in ARMS) + " | s |",
+              "| --- | --- | ---: | --- | ---: | --- | " + " | ".join("---:" for _ in ARMS) + " | ---: |"]
+    for case in cases:
+        scores = ", ".join(f"{'*' if policy == case.chosen else ''}{policy} as {proxy}: {score:g}"
+                           for policy, proxy, score in case.scores)
+        wall = sum(goal.wall_s for goal in {id(g): g for g in case.goals.values()}.values())
+        lines.append(f"| {case.run} | {case.object.name} | {case.object.lifting_pose_share:.0%} | "
+                     f"{case.object.third} | {case.seed} | {scores} | "
+                     + " | ".join(_steps(case.goals.get(arm)) for arm in ARMS) + f" | {wall:.0f} |")
+    return "\n".join(lines) + "\n"
+
