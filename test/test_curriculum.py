@@ -10,7 +10,7 @@ from glocal_ros.curriculum.journal import CallJournal, JournalMismatch
 from glocal_ros.curriculum.codes import (
     ROLE_CLUSTER, ROLE_GLOBAL, ROLE_SAMPLED, STATUS_EVALUATING, STATUS_FINISHED,
 )
-from glocal_ros.curriculum.learner import TrainGoal
+from glocal_ros.curriculum.learner import EpisodeSummary, TrainGoal, TrainResult
 from glocal_ros.curriculum.run import Run, RunConfig
 from glocal_ros.curriculum.strategies import STRATEGIES, run_strategy
 from glocal_ros.tasks import ALL_TASKS
@@ -260,6 +260,49 @@ def test_the_baselines_draw_from_all_tasks_or_the_unlearned_ones(strategy, basel
         assert "A0" in drawn_once_learned, "a learned task is still drawn"
     else:
         assert not drawn_once_learned
+
+
+class LockstepFailures:
+    """N envs stepping together, every episode failing at T, as the learner runs a goal: after s lockstep
+    steps N x (s // T) episodes have finished, and a goal ends with its limit's last one or at its budget."""
+
+    def __init__(self, envs: int = 4, max_episode_steps: int = 50):
+        self.envs, self.max_episode_steps = envs, max_episode_steps
+        self.goals: list[tuple[TrainGoal, TrainResult]] = []
+
+    def evaluate(self, policy, tasks, episodes, seed=None):
+        return {task: 0.0 for task in tasks}
+
+    def copy(self, source, destination):
+        pass
+
+    def train(self, request: TrainGoal) -> TrainResult:
+        rounds = request.step_budget // self.envs // self.max_episode_steps  # whole episodes per env
+        finished = min(request.episode_limit, self.envs * rounds)
+        if finished == request.episode_limit:
+            steps = -(-finished // self.envs) * self.max_episode_steps * self.envs
+        else:
+            steps = request.step_budget - request.step_budget % self.envs
+        episodes = tuple(EpisodeSummary(task, -float(self.max_episode_steps), self.max_episode_steps, False)
+                         for task in request.episode_tasks[:finished])
+        result = TrainResult(False, -1.0, steps, episodes)
+        self.goals.append((request, result))
+        return result
+
+
+@pytest.mark.parametrize("strategy, fit_rate", [("alp_gmm_10", 10), ("alp_gmm_250", 250)])
+def test_alp_gmm_refits_on_schedule_with_lockstep_envs_that_finish_episodes_together(strategy, fit_rate):
+    """With N = 4 lockstep envs a chunk of k episodes' steps finishes up to N - 1 short; the next goal, the
+    remainder, once had a budget of fewer than N episodes' steps and finished none, so ALP-GMM never refitted
+    and every later goal was 100 steps of cut episodes (the paper-bench runs of 6e6ac60)."""
+    learner = LockstepFailures()
+    run(strategy, learner=learner, **(SHORT | dict(step_budget=60_000, baseline_eval_interval=30_000)))
+    assert all(result.episodes for _, result in learner.goals), "every goal finishes episodes"
+    episodes = sum(len(result.episodes) for _, result in learner.goals)
+    steps = sum(result.steps_used for _, result in learner.goals)
+    # Nearly every step in a counted episode (a chunk of 10 on 4 envs: 12 finish together, 10 count).
+    assert episodes >= 0.8 * steps / learner.max_episode_steps, (episodes, steps)
+    assert episodes // fit_rate >= 4, "the GMM refits every fit_rate episodes"
 
 
 def test_baseline_tasks_must_be_all_or_unlearned():

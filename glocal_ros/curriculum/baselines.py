@@ -30,7 +30,12 @@ Choices:
   to N - 1 episodes are still running when the chunk's last one ends (cut
   at the goal's end, they train but report no return). With more than 16
   envs the listed tasks would cycle. Its step budget is the chunk's
-  full-length episodes.
+  full-length episodes, and at least ``MAX_LOCKSTEP_ENVS`` of them: N
+  lockstep envs finish k full-length episodes only after N x ceil(k / N) x T
+  steps, so a chunk of k steps' worth ends up to N - 1 episodes short, and a
+  remainder below N would finish none; ALP-GMM, whose next chunk is the
+  remainder, then never refitted (with N = 4 it drew from its first GMM, or
+  uniformly, for the rest of a run, each goal 100 steps long).
 - ``baseline_tasks`` (default ``all``): the samplers draw from every task of
   the run, learned or not. The paper describes random as "randomly selecting
   objects for training" with "a single policy", and for ALP-GMM changes the
@@ -53,8 +58,10 @@ from glocal_ros.curriculum.codes import ROLE_SAMPLED
 from glocal_ros.curriculum.run import Run
 
 
-#: Draws listed beyond a goal's chunk of episodes: enough for N <= 16 lockstep envs (see the module doc).
-TASKS_AHEAD = 33
+#: The most lockstep envs a baseline's goal is sized for (see the module doc).
+MAX_LOCKSTEP_ENVS = 16
+#: Draws listed beyond a goal's chunk of episodes: enough for N <= MAX_LOCKSTEP_ENVS.
+TASKS_AHEAD = 1 + 2 * MAX_LOCKSTEP_ENVS
 
 
 class TaskSampler(Protocol):
@@ -105,9 +112,10 @@ def run_sampled(run: Run, sampler: TaskSampler, chunk_episodes: Callable[[], int
         chunk = chunk_episodes()
         tasks = tuple(sampler.sample() for _ in range(chunk + TASKS_AHEAD))
         to_evaluation = next_evaluation - run.state.total_steps
+        chunk_steps = max(chunk, MAX_LOCKSTEP_ENVS) * max_episode_steps
         result = run.train(ROLE_SAMPLED, TrainGoal(
             task="", episode_tasks=tasks, episode_limit=chunk, initial_policy=initial, output_policy=policy,
-            step_budget=min(chunk * max_episode_steps, to_evaluation), stop_when_learned=False,
+            step_budget=min(chunk_steps, to_evaluation), stop_when_learned=False,
             keep_replay_buffer=True,
         ))
         initial = policy
@@ -115,7 +123,7 @@ def run_sampled(run: Run, sampler: TaskSampler, chunk_episodes: Callable[[], int
         for episode in result.episodes:
             sampler.update(episode.task, episode.episode_return)
         # A goal cut at the evaluation's step ends there, or up to N - 1 steps short of it (lockstep).
-        cut_for_evaluation = chunk * max_episode_steps > to_evaluation and len(result.episodes) < chunk
+        cut_for_evaluation = chunk_steps > to_evaluation and len(result.episodes) < chunk
         if run.state.total_steps >= next_evaluation or cut_for_evaluation or run.steps_left == 0:
             next_evaluation += config.baseline_eval_interval
             while next_evaluation <= run.state.total_steps:
