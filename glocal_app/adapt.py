@@ -5,9 +5,10 @@
 1. Checks everything before any goal starts, leaving the run directory as it
    was when one fails: the run is finished (its curriculum state), holds a
    global policy (``glocal_ros.adaptation.run_candidates``), ``NAME`` names a
-   novel object (not A0..G6 in any case) that this run has not adapted to, and
-   the object can be prepared (``glocal_ros.objects.pipeline.prepare_object``,
-   done in a scratch directory first).
+   novel object (not A0..G6 in any case) that this run has not adapted to, the
+   budget and seed are ones the learner takes, and the object can be prepared
+   (``glocal_ros.objects.pipeline.prepare_object``, done in a scratch directory
+   first).
 2. Moves the prepared object to ``RUN_DIR/adapt/NAME/objects`` (a set of
    one; the run's own set is not touched), and starts recorder, sim and learner
    as the run had them (its preset, learner profile and seed:
@@ -20,8 +21,16 @@
    the preset's per-task budget) are spent, into ``<run_id>.adapt-NAME``
    beside the run's policies.
 4. Writes ``RUN_DIR/adapt/NAME/adapt.json`` (every candidate's score, the one
-   chosen, steps to B) and prints it. An adaptation stopped before that (Ctrl-C)
-   starts again from step 2 when the same command is given again.
+   chosen, steps to B) and prints it.
+
+An adaptation stopped before step 4 (Ctrl-C) and given again: with the same
+object (the prepared object's files equal, ``object_fingerprint``) it goes on
+in its directory, a new bag beside the first, the learner resuming the Train
+goal from its checkpoint or answering it from its finished marker; with another
+object it starts again from step 2, the stopped goal's checkpoint removed, or
+is refused when the stopped one had stored its policy (the store has no delete:
+the message names the directory to remove). The graph is one pair, whatever the
+run's ``--pairs``: one goal runs at a time.
 
 The goal's episodes and evaluations are in the bag like any goal's; the
 sim's episodes name the task ``NAME@PROXY`` (``glocal_ros.tasks``).
@@ -33,6 +42,7 @@ import json
 import shutil
 import tempfile
 import time
+from dataclasses import replace
 from pathlib import Path
 
 from glocal_app.processes import (
@@ -41,6 +51,7 @@ from glocal_app.processes import (
     NodeProcess,
     RunOptions,
     isolated_environment,
+    new_bag_path,
     preset_file,
     preset_parameters,
     recorded_run_settings,
@@ -98,8 +109,14 @@ def _curriculum_parameters(options: RunOptions) -> dict:
 
 
 def _adapt_settings(options: RunOptions, run: dict, budget: int | None, seed: int | None) -> AdaptSettings:
-    """The run's B, S-bar and evaluation interval (its preset's), ``budget`` or the preset's per-task budget."""
+    """The run's B, S-bar and evaluation interval (its preset's), ``budget`` or the preset's per-task budget;
+    ``ValueError`` for a budget the run's learner would refuse, or a seed out of range."""
+    from learner_node.training import DEFAULT_MAX_STEP_BUDGET
+
     curriculum = _curriculum_parameters(options)
+    most = int(preset_parameters(options.preset, "learner_node").get("max_step_budget", DEFAULT_MAX_STEP_BUDGET))
+    if budget is not None and not 1 <= budget <= most:
+        raise ValueError(f"--budget must be 1 to {most} (the run's learner's max_step_budget), got {budget}")
     return AdaptSettings(budget if budget is not None else int(curriculum["task_step_budget"]),
                          float(curriculum["threshold"]), int(curriculum["eval_episodes"]),
                          int(curriculum["eval_interval"]), int(run["seed"] if seed is None else seed))
@@ -108,12 +125,12 @@ def _adapt_settings(options: RunOptions, run: dict, budget: int | None, seed: in
 def adapt_run(run_dir: Path, source: Path, name: str, budget: int | None = None, seed: int | None = None,
               startup_timeout: float = 120.0, learner_timeout: float = 3600.0) -> Adaptation:
     """Adapt run ``run_dir``'s policies to the object ``source`` as ``name`` (the module's steps 1-4)."""
+    from glocal_app.benches.cost import object_fingerprint
     from glocal_ros.objects.pipeline import prepare_object
+    from learner_node.training import CHECKPOINTS_DIR
 
     run_dir = Path(run_dir).resolve()
     check_novel_name(name)
-    if budget is not None and budget < 1:
-        raise ValueError(f"--budget must be at least 1, got {budget}")
     options, run = run_summary(run_dir)
     settings = _adapt_settings(options, run, budget, seed)
     stored = stored_tasks(run_dir / "policies")
@@ -121,42 +138,53 @@ def adapt_run(run_dir: Path, source: Path, name: str, budget: int | None = None,
                                 run["initial_policy"])
     output = adapted_policy(run["run_id"], name)
     work = run_dir / ADAPT_DIR / name
-    if (work / RESULT_FILE).exists() or output in stored:
-        raise ValueError(f"run {run['run_id']} has adapted to an object named {name!r} already ({work}, policy "
-                         f"{output}): choose another name")
-    if work.exists():
-        print(f"{work}: an adaptation that did not finish; starting it again", flush=True)
-        shutil.rmtree(work)
+    if (work / RESULT_FILE).exists():
+        raise ValueError(f"run {run['run_id']} has adapted to an object named {name!r} already ({work}): choose "
+                         "another name")
     scratch = Path(tempfile.mkdtemp(prefix=f"glocal-adapt-{name}-"))
     try:
         prepare_object(Path(source), name, scratch / "objects", seed=settings.seed)
-        work.parent.mkdir(parents=True, exist_ok=True)
-        shutil.move(str(scratch), str(work))
+        same_object = (work / "objects" / name).is_dir() and (
+            object_fingerprint(name, work / "objects") == object_fingerprint(name, scratch / "objects"))
+        if output in stored and not same_object:
+            raise ValueError(f"the policy {output} exists but not the adaptation that made it from this object "
+                             f"({work / RESULT_FILE} missing): choose another name, or remove "
+                             f"{run_dir / 'policies' / output} to adapt again")
+        if same_object:
+            # The learner resumes the goal from its checkpoint, or answers it from its finished marker.
+            print(f"{work}: an adaptation of this object that did not finish; going on", flush=True)
+        else:
+            if work.exists():
+                print(f"{work}: an adaptation of another object that did not finish; starting again", flush=True)
+                shutil.rmtree(work)
+            # A checkpoint of the same goal name on another object must not be resumed.
+            shutil.rmtree(run_dir / "policies" / CHECKPOINTS_DIR / output, ignore_errors=True)
+            work.parent.mkdir(parents=True, exist_ok=True)
+            shutil.move(str(scratch), str(work))
     finally:
         shutil.rmtree(scratch, ignore_errors=True)
-    adaptation = _adapt_through_graph(run_dir, work, options, run, candidates, output, settings, name,
-                                      startup_timeout, learner_timeout)
-    text = (json.dumps(adaptation.to_dict(), indent=1) + "\n").encode()
-    atomic_write(work / RESULT_FILE, lambda stream: stream.write(text))
-    return adaptation
+    return _adapt_through_graph(run_dir, work, options, run, candidates, output, settings, name,
+                                startup_timeout, learner_timeout)
 
 
 def _adapt_through_graph(run_dir: Path, work: Path, options: RunOptions, run: dict, candidates, output: str,
                          settings: AdaptSettings, name: str, startup_timeout: float,
                          learner_timeout: float) -> Adaptation:
+    """Steps 2-4 on the prepared object: the graph of one pair (whatever the run had), ``RESULT_FILE`` written
+    before the graph stops."""
     from curriculum_node.ros_learner import RosLearner
     from glocal_app.launch import stop_graph, wait_for_recorder
     from glocal_ros.domain import reserve_domain_id
     from node_common.runner import spinning_node
 
     domain_id, lock = reserve_domain_id()
-    logs = work / "logs"
-    env = isolated_environment(domain_id, logs)
-    plan = options.parameters(run["strategy"], int(run["seed"]), run_dir, work / "bag")
-    plan["sim_node"].update(objects_dir=str(work / "objects"), initial_task=novel_task(name, candidates[0].proxy))
-    plan["learner_node"].update(tensorboard_dir=str(work / "tensorboard"))
     started: list[NodeProcess] = []
     try:
+        logs = work / "logs"
+        env = isolated_environment(domain_id, logs)
+        plan = replace(options, pairs=1).parameters(run["strategy"], int(run["seed"]), run_dir, new_bag_path(work))
+        plan["sim_node"].update(objects_dir=str(work / "objects"), initial_task=novel_task(name, candidates[0].proxy))
+        plan["learner_node"].update(tensorboard_dir=str(work / "tensorboard"))
         for node in NODES:
             started.append(NodeProcess(node, logs, plan[node], preset_file(options.preset), env))
         with spinning_node("glocal_ros_adapt", domain_id, num_threads=4) as node:
@@ -166,7 +194,9 @@ def _adapt_through_graph(run_dir: Path, work: Path, options: RunOptions, run: di
             started_at = time.monotonic()
             adaptation = adapt(learner, name, candidates, output, settings)
             print(f"adapted in {time.monotonic() - started_at:.0f} s", flush=True)
-            return adaptation
+        text = (json.dumps(adaptation.to_dict(), indent=1) + "\n").encode()
+        atomic_write(work / RESULT_FILE, lambda stream: stream.write(text))
+        return adaptation
     finally:
         stop_graph(started)
         lock.close()

@@ -72,7 +72,7 @@ def cmd_run(args: argparse.Namespace) -> int:
 def cmd_evaluate(args: argparse.Namespace) -> int:
     from glocal_app.commands import evaluate_policy
 
-    scores = evaluate_policy(args.policy, parse_task_list(args.tasks), args.episodes, args.seed, args.timeout)
+    scores = evaluate_policy(args.policy, parse_task_list(args.tasks, novel=True), args.episodes, args.seed, args.timeout)
     if args.json:
         print(json.dumps({task: successes for task, successes, _ in scores}))
     else:
@@ -133,7 +133,7 @@ def add_graph_commands(commands) -> None:
 
     evaluate = commands.add_parser("evaluate", help="score a policy with a running learner (successes per task)")
     evaluate.add_argument("--policy", required=True)
-    evaluate.add_argument("--tasks", required=True, help="comma-separated, e.g. A0,B3, or 'all'")
+    evaluate.add_argument("--tasks", required=True, help="comma-separated, e.g. A0,B3, or 'all'; NAME@PROXY for a novel object the sim serves")
     evaluate.add_argument("--episodes", type=int, default=100, help="episodes per task (default 100)")
     evaluate.add_argument("--seed", type=int, default=-1, help="seed of the evaluation resets; -1 for none")
     evaluate.add_argument("--timeout", type=float, default=600.0, help="seconds to wait for the answer")

@@ -9,6 +9,7 @@ from glocal_app.arguments import add_profile_argument, count
 from glocal_app.exit_codes import EXIT_FAILED, EXIT_OK
 from glocal_ros.curriculum.learner import paper_threshold, passes_threshold
 from glocal_ros.paths import assets_dir, object_urdf
+from glocal_ros.tasks import split_novel_task
 from learner_node.prior import PriorConfig
 from learner_node.profiles import DEFAULT_PROFILE, PROFILES, learner_profile
 from learner_node.sac_settings import EXPERIENCE_TRANSITIONS, NETWORKS
@@ -72,10 +73,13 @@ def cmd_collect_experience(args: argparse.Namespace) -> int:
     if args.name not in source:
         raise ValueError(f"no policy {args.name!r} in {source.root}")
     record = source.record(args.name)
+    if split_novel_task(record.task) and args.objects is None:
+        raise ValueError(f"{args.name} was trained on the novel object of {record.task}: give its objects "
+                         f"directory with --objects (adapt's RUN_DIR/adapt/NAME/objects)")
     out = PolicyStore(args.out or args.store)
     if out.root.resolve() != source.root.resolve():
         out.add_copy(source, args.name, args.name)
-    env = GraspEnv(record.task)
+    env = GraspEnv(record.task, args.objects)
     try:
         experience = collect_experience(source.load(args.name), env, args.transitions, args.seed)
     finally:
@@ -194,6 +198,9 @@ def add_policy_commands(commands) -> None:
     experience.add_argument("--out", type=Path, default=None, help="the store to write it to (default: --store)")
     experience.add_argument("--transitions", type=count(1), default=EXPERIENCE_TRANSITIONS)
     experience.add_argument("--seed", type=int, default=0, help="of the first episode; episode k: seed + k")
+    experience.add_argument("--objects", type=Path, default=None,
+                            help="the objects directory of its task (default: the package's set; needed for a "
+                                 "novel object's task)")
     experience.set_defaults(func=cmd_collect_experience, check=check_experience_arguments)
 
     policy = commands.add_parser("policy", help="stored policies: import one of the format before")

@@ -29,7 +29,7 @@ from dataclasses import asdict, dataclass
 from typing import Mapping, Sequence
 
 from glocal_ros.curriculum.learner import Learner, TrainGoal
-from glocal_ros.seeds import derived_seed
+from glocal_ros.seeds import MAX_SEED, derived_seed
 from glocal_ros.tasks import PRIOR_TASK, check_novel_name, novel_task, task_index
 
 #: The strategies that train global tasks; their global policies are ``<run_id>.G<m>``
@@ -67,6 +67,8 @@ class AdaptSettings:
     def __post_init__(self) -> None:
         if self.step_budget < 1 or self.eval_episodes < 1 or self.eval_interval < 0:
             raise ValueError(f"need step_budget >= 1, eval_episodes >= 1, eval_interval >= 0: {self}")
+        if not 0 <= self.seed <= MAX_SEED:
+            raise ValueError(f"seed must be in 0..{MAX_SEED}, got {self.seed}")
 
 
 @dataclass(frozen=True)

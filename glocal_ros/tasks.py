@@ -59,7 +59,7 @@ def grid_coordinates(task: str) -> tuple[int, int]:
 
 def check_novel_name(name: str) -> str:
     """``name`` if it can name a novel object: ``UnknownTaskError`` if it is malformed or a grid task's name."""
-    if not _NOVEL_NAME.match(name):
+    if not _NOVEL_NAME.fullmatch(name):
         raise UnknownTaskError(f"invalid object name {name!r}: a letter, then letters, digits, '_' or '-', "
                                f"at most 64")
     if name.upper() in _INDEX:
@@ -77,7 +77,7 @@ def novel_task(name: str, proxy: str) -> str:
 def split_novel_task(task: str) -> tuple[str, str] | None:
     """``(name, proxy)`` of a well-formed novel task, None for any other string."""
     name, separator, proxy = task.partition(NOVEL_SEPARATOR)
-    if not separator or proxy not in _INDEX or not _NOVEL_NAME.match(name) or name.upper() in _INDEX:
+    if not separator or proxy not in _INDEX or not _NOVEL_NAME.fullmatch(name) or name.upper() in _INDEX:
         return None
     return name, proxy
 
@@ -123,15 +123,24 @@ def validate_tasks(tasks: Iterable[str]) -> list[str]:
     return checked
 
 
-def parse_task_list(text: str) -> list[str]:
-    """Parse ``"A0,B3"`` or ``"all"`` into task names."""
+def parse_task_list(text: str, novel: bool = False) -> list[str]:
+    """Parse ``"A0,B3"`` or ``"all"`` into task names; with ``novel``, ``NAME@PROXY`` too (``check_task``).
+
+    Grid names and proxies are upper-cased; a novel object's name is kept as given (it names a directory).
+    """
     text = text.strip()
     if text.lower() == "all":
         return list(ALL_TASKS)
-    tasks = [part.strip().upper() for part in text.split(",") if part.strip()]
-    if not tasks:
+    parts = [part.strip() for part in text.split(",") if part.strip()]
+    if not parts:
         raise UnknownTaskError("no task given")
-    return validate_tasks(tasks)
+    if not novel:
+        return validate_tasks(part.upper() for part in parts)
+    tasks = []
+    for part in parts:
+        name, separator, proxy = part.partition(NOVEL_SEPARATOR)
+        tasks.append(check_task(f"{name}{separator}{proxy.upper()}" if separator else part.upper()))
+    return tasks
 
 
 def sorted_tasks(tasks: Sequence[str]) -> list[str]:

@@ -49,7 +49,8 @@ from learner_node.policy_store import PolicyStore, default_policy_dir
 from learner_node.profiles import DEFAULT_PROFILE, PROFILES, learner_profile
 from learner_node.sac_settings import FINE_TUNING_RECIPES
 from learner_node.sim_client import SimClient
-from learner_node.training import DEFAULT_MAX_STEP_BUDGET, GoalFailed, Trainer, TrainProgress, check_goal
+from learner_node.training import (CHECKPOINTS_DIR, DEFAULT_MAX_STEP_BUDGET, GoalFailed, Trainer, TrainProgress,
+                                   check_goal)
 from node_common import names, qos
 from node_common.params import declare
 from node_common.runner import spin_node
@@ -110,7 +111,7 @@ class LearnerNode(Node):
 
         self.policies = PolicyRegistry(PolicyStore(Path(policy_dir)), [PolicyStore(profile.shipped_priors())], seed)
         self.sim = SimClient(self, timeout_sec=self.sim_timeout)
-        self.trainer = Trainer(self.sim, self.policies, Path(policy_dir) / ".checkpoints", seed, checkpoint_interval,
+        self.trainer = Trainer(self.sim, self.policies, Path(policy_dir) / CHECKPOINTS_DIR, seed, checkpoint_interval,
                                profile=profile, fine_tuning=fine_tuning,
                                tensorboard_dir=Path(tensorboard_dir) if tensorboard_dir else None)
         # Whoever holds sim_lock runs the queued jobs: a training goal between

@@ -89,7 +89,7 @@ class PolicyRecord:
 
 
 def check_name(name: str) -> str:
-    if not _NAME.match(name):
+    if not _NAME.fullmatch(name):
         raise ValueError(f"invalid policy name {name!r}: letters, digits, '_', '.', '-', at most 128")
     return name
 

@@ -103,6 +103,8 @@ _CHECKPOINT_FILES = {"model": re.compile(r"^model-[1-9][0-9]{0,17}\.(npz|zip)$")
 #: Keys of a seeded goal's streams (``glocal_ros.seeds.derived_seed``): training, and each evaluation.
 TRAINING_STREAM, EVALUATION_STREAM = 0, 1
 FINISHED_FILE = "finished.json"
+#: The folder of a learner's policy store that holds each Train goal's checkpoint, by output policy.
+CHECKPOINTS_DIR = ".checkpoints"
 
 
 def check_goal(goal: TrainGoal, max_eval_episodes: int = 1_000_000,

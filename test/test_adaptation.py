@@ -78,6 +78,8 @@ def test_every_candidate_is_scored_on_the_same_episodes_under_its_bit_and_the_be
 def test_bad_settings_and_names_are_refused_before_any_call():
     with pytest.raises(ValueError, match="step_budget >= 1"):
         AdaptSettings(step_budget=0, threshold=1.0, eval_episodes=2, eval_interval=0)
+    with pytest.raises(ValueError, match="seed must be in 0..2147483647"):
+        AdaptSettings(step_budget=10, threshold=1.0, eval_episodes=2, eval_interval=0, seed=-1)
     learner = SimulatedLearner()
     with pytest.raises(UnknownTaskError, match="collides with grid task C4"):
         adapt(learner, "c4", [Candidate("prior", ("prior",), "A0")], "x", AdaptSettings(10, 1.0, 2, 0))
@@ -103,3 +105,13 @@ def test_bench_fewshot_takes_objects_from_every_third_of_the_lifting_pose_shares
         novel_objects(tmp_path)
     with pytest.raises(ValueError, match="need 1 to 16"):
         novel_objects(objects_dir(), per_third=17)
+
+
+def test_bench_fewshot_refuses_objects_of_the_committed_set_before_any_goal():
+    from glocal_app.benches.fewshot import run_fewshot_bench
+    from glocal_app.benches.transfer import TransferSettings
+    from glocal_ros.paths import objects_dir
+
+    with pytest.raises(ValueError, match=r"not novel, objects of the committed set: ([A-G]\d) \(\1\)"):
+        run_fewshot_bench([], objects_dir(), [0], TransferSettings(step_budget=40, eval_interval=20,
+                                                                     eval_episodes=2, num_envs=2), per_third=1)

@@ -56,11 +56,17 @@ def test_collect_experience_gives_a_stored_policy_transitions_of_it_acting_on_it
 
 
 def test_collect_experience_refuses_bad_input_without_a_traceback(tmp_path):
+    from learner_node.policy_store import PolicyStore
+
+    adapted = PolicyStore(tmp_path / "adapted")  # a policy adapt made: its task a novel object's
+    adapted.add_copy(PolicyStore(REPO / "assets" / "priors"), "prior", "run.adapt-mug")
+    kept = adapted.update("run.adapt-mug", task="mug@A0").experience_file
     for args, message in ((("nope", "--store", str(tmp_path)), "no policy 'nope'"),
-                          (("prior", "--out", str(tmp_path), "--transitions", "0"), "--transitions: 0 is below 1")):
+                          (("prior", "--out", str(tmp_path), "--transitions", "0"), "--transitions: 0 is below 1"),
+                          (("run.adapt-mug", "--store", str(tmp_path / "adapted")), "give its objects directory")):
         result = run_cli("collect-experience", *args)
         assert result.returncode == 2 and message in result.stderr and "Traceback" not in result.stderr
-    assert not (tmp_path / "prior").exists()
+    assert not (tmp_path / "prior").exists() and adapted.record("run.adapt-mug").experience_file == kept
 
 
 def test_train_prior_refuses_a_minimum_above_its_budget_before_training():

@@ -21,6 +21,11 @@ def test_parse_task_list():
         parse_task_list("A0,H1")
     with pytest.raises(UnknownTaskError):
         parse_task_list(" , ")
+    with pytest.raises(UnknownTaskError, match="MUG@C4"):
+        parse_task_list("a0,mug@c4")  # a curriculum's tasks are the grid
+    assert parse_task_list("a0, Mug@c4", novel=True) == ["A0", "Mug@C4"]  # the name is a directory's: as given
+    with pytest.raises(UnknownTaskError, match="collides with grid task B3"):
+        parse_task_list("b3@A0", novel=True)
 
 
 def test_sorted_tasks_uses_grid_order():
@@ -42,5 +47,8 @@ def test_a_novel_object_is_served_under_its_proxys_bit_and_never_in_a_curriculum
             check_task(refused)
     with pytest.raises(UnknownTaskError, match="collides with grid task G6"):
         check_novel_name("g6")
+    with pytest.raises(UnknownTaskError, match="invalid object name"):
+        check_novel_name("mug\n")  # a name is a directory's: the whole of it is checked
+    assert split_novel_task("mug\n@C4") is None
     with pytest.raises(UnknownTaskError):
         validate_tasks([task])  # a run's task set is the grid

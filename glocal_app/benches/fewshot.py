@@ -107,6 +107,20 @@ def novel_objects(objects_dir: Path, per_third: int = 3, prefix: str | None = No
     return chosen
 
 
+def check_novel(objects: Sequence[NovelObject]) -> None:
+    """``ValueError`` when one of ``objects`` is an object of the committed set, which every run trains on."""
+    from glocal_app.benches.cost import object_fingerprint
+    from glocal_ros.paths import objects_dir
+    from glocal_ros.tasks import ALL_TASKS
+
+    committed = {object_fingerprint(task, objects_dir()): task for task in ALL_TASKS}
+    known = [f"{novel.source.name} ({committed[fingerprint]})" for novel in objects
+             if (fingerprint := object_fingerprint(novel.source.name, novel.source.parent)) in committed]
+    if known:
+        raise ValueError(f"not novel, objects of the committed set: {', '.join(known)}: give a set that `assets "
+                         "generate --seed S` made with a seed the committed set did not use")
+
+
 def score_candidates(run: FewshotRun, novel: NovelObject, objects: Path, seed: int, settings: TransferSettings
                      ) -> list[tuple[str, str, float]]:
     """Every candidate's successes on the object under its own bit, on adapt's seeded episodes, in-process."""
@@ -184,8 +198,9 @@ def run_fewshot_bench(run_dirs: Sequence[Path], objects_dir: Path, seeds: Sequen
                       per_third: int = 3, log: Callable[[str], None] = print) -> list[FewshotCase]:
     """Every run x object x seed (``ValueError`` before any goal for a run or a set it cannot use)."""
     settings.check()
-    runs = [read_run(path) for path in run_dirs]
     objects = novel_objects(objects_dir, per_third)
+    check_novel(objects)
+    runs = [read_run(path) for path in run_dirs]
     if not seeds or len(set(seeds)) != len(seeds):
         raise ValueError(f"seeds must be given once each, got {list(seeds)}")
     return [run_case(run, novel, seed, settings, log) for run in runs for novel in objects for seed in seeds]
