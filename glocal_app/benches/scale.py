@@ -13,8 +13,9 @@ ablations, 10 seeds each), S-bar = 100, T = 50.
   each goal, about 74 goals (49 tasks, half of them twice); an evaluation of the remaining tasks at
   each of 12 iterations (the paper's sample run), the remaining tasks falling evenly from 49 to 0.
 - Baselines: the remaining tasks evaluated at step 0 and every 100,000 steps (41 evaluations), their
-  number falling evenly from 49 to the 8 the paper leaves unlearned; goals of 100 episodes of up to
-  50 steps: 800 goals.
+  number falling evenly from 49 to the 8 the paper leaves unlearned; goals of a chunk of episodes of up
+  to 50 steps (``glocal_ros.curriculum.baselines``): random's 100 episodes, 800 goals; ALP-GMM's refit
+  interval, 320 goals for ALP-GMM-250 and 8,000 for ALP-GMM-10.
 One run per machine of this kind (2 cores: the sim and learner processes of one pair fill them; a second
 pair would halve each one's speed), so M machines run M runs at a time.
 """
@@ -60,14 +61,14 @@ def _glocal_like(strategy: str) -> PaperRun:
     return PaperRun(strategy, 10, 4_000_000, goals, iterations, int(100 * (checks + iteration_tasks)))
 
 
-def _baseline(strategy: str) -> PaperRun:
+def _baseline(strategy: str, episodes_per_goal: int) -> PaperRun:
     evaluations = 1 + 4_000_000 // 100_000
-    return PaperRun(strategy, 10, 4_000_000, 4_000_000 // (100 * 50), evaluations,
+    return PaperRun(strategy, 10, 4_000_000, 4_000_000 // (episodes_per_goal * 50), evaluations,
                     int(100 * evaluations * (49 + 8) / 2))
 
 
-PAPER_GRID = (_glocal_like("glocal"), _baseline("random"), _baseline("alp_gmm_250"), _baseline("alp_gmm_10"),
-              _glocal_like("glocal_no_global"), _glocal_like("glocal_random_cluster"))
+PAPER_GRID = (_glocal_like("glocal"), _baseline("random", 100), _baseline("alp_gmm_250", 250),
+              _baseline("alp_gmm_10", 10), _glocal_like("glocal_no_global"), _glocal_like("glocal_random_cluster"))
 
 
 def max_episode_steps(run_dir: Path) -> int:
