@@ -17,16 +17,18 @@ import pytest
 from rosbags.rosbag2 import Reader
 
 from conftest import REPO
-from glocal_app.benches.curriculum import KEPT_TOPICS, PAPER_LEARNED_AT_4M
+from glocal_app.benches.curriculum import KEPT_TOPICS, PAPER_LEARNED_AT_4M, keep_run
 from glocal_app.processes import RUN_FILE, STATE_FILE, RunOptions
 from glocal_app.provenance import CODE_FILE, code_version, describe_code, run_code_versions
 from glocal_ros.analysis.estimates import improvement_interval, iqm_interval
 from glocal_ros.analysis.report import improvement_cell, p_value_cell
 from glocal_ros.analysis.runs import welch_p_value
+from glocal_ros.bag_repair import bag_is_intact
+from glocal_ros.recording import BagWriter
 from glocal_ros.tasks import ALL_TASKS
 from glocal_ros.topics import CURRICULUM_STATE
 from test_launch import graph_env
-from test_report import INTERVAL, PNG_MAGIC, SyntheticRun, glocal_run, write_run
+from test_report import INTERVAL, PNG_MAGIC, TS, SyntheticRun, glocal_run, write_bag, write_run
 
 CLI = [sys.executable, "-m", "glocal_app.cli"]
 
@@ -115,6 +117,35 @@ def test_runs_at_other_tasks_or_budgets_are_not_tabulated_together(tmp_path):
     result = bench("--tabulate", "--out", str(out), "--results", str(tmp_path / "curriculum.md"))
     assert result.returncode == 2 and "not runs at equal settings" in result.stderr, result.stderr
     assert not (tmp_path / "curriculum.md").exists()
+
+
+def test_a_resumed_run_whose_first_bag_was_cut_is_repaired_then_kept(tmp_path, capsys):
+    run_dir = record(tmp_path / "runs", glocal_run(0))
+    (run_dir / STATE_FILE).parent.mkdir()
+    (run_dir / STATE_FILE).write_text("{}\n")
+    # The first launch killed: its bag as the recorder leaves it (no summary, no metadata.yaml); resumed in bag.1.
+    first, rest = glocal_run(0).messages(True)[:8], glocal_run(0).messages(True)[8:]
+    shutil.rmtree(run_dir / "bag")
+    whole = tmp_path / "whole"
+    writer = BagWriter(whole, typestore=TS)
+    for topic, stamp, data in first:
+        writer.write(topic, stamp, data)
+    writer.flush()
+    shutil.copytree(whole, run_dir / "bag")
+    writer.close()
+    write_bag(run_dir / "bag.1", rest)
+    assert not bag_is_intact(run_dir / "bag")
+
+    kept = keep_run(run_dir, tmp_path / "kept")
+
+    assert "bag: cut by a killed launch, repaired" in capsys.readouterr().out
+    assert (run_dir / "bag.damaged").is_dir()  # the original, beside the repaired bag
+    def kept_messages(bag: Path) -> dict[str, int]:  # a repaired bag has no channel that held no message
+        return {t: n for t, n in message_counts(bag).items() if n and t in {spec.name for spec in KEPT_TOPICS}}
+
+    assert kept_messages(kept / "bag") == kept_messages(whole)
+    assert kept_messages(kept / "bag.1") == kept_messages(run_dir / "bag.1")
+    assert kept_messages(kept / "bag")[CURRICULUM_STATE.name] > 0
 
 
 @pytest.mark.parametrize("arguments, error", [

@@ -38,6 +38,9 @@ as it finishes, in KEEP (by default beside the table: ``curriculum.md`` ->
 reduced to the curriculum's and the learner's topics (``KEPT_TOPICS``, a few
 hundred kilobytes), which is all the table and the report's figures read, and
 the code that made it (``glocal_app.provenance``), which the table names.
+A run resumed after its launch was killed (a session's end) has a bag the
+recorder never closed; keeping the run repairs that bag first, as
+``glocal-ros bag repair`` does, so the bench goes on instead of stopping.
 A bench started where OUT lacks a kept run copies it into OUT first, so it
 counts as finished and is not run again: commit KEEP, and a bench stopped on
 one machine goes on from its last finished run on another.
@@ -289,9 +292,11 @@ def bench_inputs(out: Path, merge: Sequence[Path], keep: Path | None = None) -> 
 def keep_run(run_dir: Path, keep: Path) -> Path | None:
     """Keep the finished run ``run_dir`` in ``keep`` (see the module's docstring); None when it is kept already.
 
-    The copy is made in a folder beside and renamed in, so a kept run is whole or absent.
+    The copy is made in a folder beside and renamed in, so a kept run is whole or absent. A bag of the run
+    that was cut (a launch killed before it resumed: its recorder never closed the bag) is repaired first
+    (``glocal_ros.bag_repair``, the original kept beside it); the run is finished, so no recorder writes it.
     """
-    from glocal_ros.bag_repair import copy_topics
+    from glocal_ros.bag_repair import bag_is_intact, copy_topics, repair_bag
     from glocal_ros.analysis.runs import find_bags
     from glocal_ros.recording import table_topic
 
@@ -307,6 +312,10 @@ def keep_run(run_dir: Path, keep: Path) -> Path | None:
         (staging / STATE_FILE).parent.mkdir(parents=True)
         shutil.copy2(run_dir / STATE_FILE, staging / STATE_FILE)
         for bag in find_bags(run_dir):
+            if not bag_is_intact(bag):
+                repaired = repair_bag(bag)
+                print(f"{bag}: cut by a killed launch, repaired ({sum(repaired.counts.values())} messages; "
+                      f"the original kept as {repaired.damaged})", flush=True)
             copy_topics(bag, staging / bag.name, lambda topic: table_topic(topic, KEPT_TOPICS) is not None)
         staging.rename(destination)
     except BaseException:
