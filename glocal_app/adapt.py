@@ -125,7 +125,7 @@ def _adapt_settings(options: RunOptions, run: dict, budget: int | None, seed: in
 def adapt_run(run_dir: Path, source: Path, name: str, budget: int | None = None, seed: int | None = None,
               startup_timeout: float = 120.0, learner_timeout: float = 3600.0) -> Adaptation:
     """Adapt run ``run_dir``'s policies to the object ``source`` as ``name`` (the module's steps 1-4)."""
-    from glocal_app.benches.cost import object_fingerprint
+    from glocal_ros.paths import object_fingerprint
     from glocal_ros.objects.pipeline import prepare_object
     from learner_node.training import CHECKPOINTS_DIR
 

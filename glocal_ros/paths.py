@@ -8,6 +8,7 @@ A source checkout (or an editable install) keeps ``assets/`` and
 
 from __future__ import annotations
 
+import hashlib
 import os
 import sys
 from pathlib import Path
@@ -44,6 +45,16 @@ def object_urdf(objects: Path, task: str) -> Path:
     """The URDF of ``task``'s object in the object set ``objects`` (the layout `assets generate` writes); a
     novel task's object is its name's directory (``glocal_ros.tasks.object_name``)."""
     return Path(objects) / object_name(task) / "model.urdf"
+
+
+def object_fingerprint(name: str, objects: Path | None = None) -> str:
+    """A hash of the files of the object ``name`` (a grid task, or a novel object's name) in the object set
+    ``objects`` (None: the shipped set): the files an env loads, so equal fingerprints are the same object."""
+    digest = hashlib.sha256()
+    for path in sorted((Path(objects or objects_dir()) / name).iterdir()):
+        if path.is_file():
+            digest.update(path.name.encode() + b"\0" + path.read_bytes() + b"\0")
+    return digest.hexdigest()[:16]
 
 
 def ros_home() -> Path:

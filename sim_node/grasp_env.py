@@ -65,15 +65,13 @@ import pybullet
 from gymnasium import spaces
 from pybullet_utils.bullet_client import BulletClient
 
-from glocal_ros.paths import object_urdf
+from glocal_ros.paths import object_urdf, objects_dir as shipped_objects_dir
 from glocal_ros.sim_contract import DEFAULT_EPISODE_STEPS, GRASP_ENV_ID
 from glocal_ros.spaces import ACTION_DIM, OBS_DIM, PHYSICS_TIMESTEP, SUBSTEPS
 from glocal_ros.tasks import NUM_TASKS, PRIOR_TASK, check_task, one_hot_bit
 from sim_node.grasp_world import OBJECT_SPOT, TABLE_TOP_Z, GraspWorld
 from sim_node.panda_robot import FINGER_MAX_POSITION, JOINT_NAMES, yaw_of
 from sim_node.physics_client import PhysicsClient
-
-DEFAULT_OBJECTS_DIR = Path(__file__).resolve().parent.parent / "assets" / "objects"
 
 OBS_TASK = slice(0, NUM_TASKS)
 OBS_GRIPPER_POSITION = slice(49, 52)
@@ -201,7 +199,7 @@ class GraspEnv(gym.Env[np.ndarray, np.ndarray]):
         self.config = config if config is not None else GraspEnvConfig()
         step_duration = self.config.substeps * self.config.timestep
         self.metadata = {**self.metadata, "render_fps": round(1.0 / step_duration)}
-        self.objects_dir = Path(objects_dir) if objects_dir is not None else DEFAULT_OBJECTS_DIR
+        self.objects_dir = Path(objects_dir) if objects_dir is not None else shipped_objects_dir()
         self.render_mode = render_mode
         self.action_space = spaces.Box(-1.0, 1.0, shape=(ACTION_DIM,), dtype=np.float32)
         low, high = _observation_bounds(self.config)

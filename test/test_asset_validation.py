@@ -84,7 +84,8 @@ def test_validate_reports_the_lifting_poses_objects_json_holds(tmp_path) -> None
 def write_cost_map(work_dir, steps_to_b: dict) -> None:
     """A bench cost work directory as the bench writes it, of hand-made curves: task -> steps to B (None: not
     learned within a cap of 3,000), seed 0, keyed on the shipped prior and the committed objects."""
-    from glocal_app.benches.cost import GoalLog, cost_settings, goal_record, object_fingerprint, run_key
+    from glocal_app.benches.cost import GoalLog, cost_settings, goal_record, run_key
+    from glocal_ros.paths import object_fingerprint
     from glocal_app.benches.transfer import TransferGoal
 
     settings = cost_settings(step_budget=3_000)

@@ -361,8 +361,8 @@ def test_the_per_row_selection_covers_every_column_and_bad_selections_are_refuse
 
 
 def test_the_goal_log_drops_a_torn_line_and_refuses_other_settings(tmp_path):
-    from glocal_app.benches.cost import (GOALS_FILE, GoalLog, cost_settings, finished_goals, goal_record,
-                                         object_fingerprint, run_key)
+    from glocal_app.benches.cost import GOALS_FILE, GoalLog, cost_settings, finished_goals, goal_record, run_key
+    from glocal_ros.paths import object_fingerprint
 
     settings = cost_settings(step_budget=2000)
     key = run_key(settings)
@@ -394,7 +394,8 @@ def test_the_goal_log_drops_a_torn_line_and_refuses_other_settings(tmp_path):
 def test_a_cost_map_from_another_prior_store_is_another_map(tmp_path):
     """A set of another A0 needs a prior trained on it (``train-prior --objects-dir``): the key names the
     prior the goals start from, so goals from the shipped prior are refused in a map from another."""
-    from glocal_app.benches.cost import GoalLog, cost_settings, finished_goals, goal_record, object_fingerprint, run_key
+    from glocal_app.benches.cost import GoalLog, cost_settings, finished_goals, goal_record, run_key
+    from glocal_ros.paths import object_fingerprint
 
     store = tmp_path / "priors"
     PolicyStore(store).add_copy(PolicyStore(assets_dir() / "priors"), "prior", "prior")

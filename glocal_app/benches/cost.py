@@ -78,7 +78,6 @@ directory keeps a second bench out of it.
 from __future__ import annotations
 
 import fcntl
-import hashlib
 import json
 import math
 import os
@@ -96,6 +95,7 @@ from glocal_app.benches.transfer import (INITIAL_POLICY, PROFILE_RECIPE, Transfe
                                          median_steps_to_b, prior_stores, run_goal)
 from glocal_ros.curriculum.learner import PAPER_EVAL_EPISODES
 from glocal_ros.files import atomic_write
+from glocal_ros.paths import object_fingerprint
 from glocal_ros.tasks import (COMPLEXITY_LEVELS, DIFFICULTY_LEVELS, NUM_TASKS, grid_coordinates, parse_task_list,
                               sorted_tasks)
 from learner_node.profiles import DEFAULT_PROFILE
@@ -169,18 +169,6 @@ def run_key(settings: TransferSettings, profile: str = DEFAULT_PROFILE, prior_st
             "eval_episodes": settings.eval_episodes, "threshold": settings.threshold,
             "num_envs": settings.num_envs, "profile": profile,
             "prior": f"{INITIAL_POLICY} ({record.model_file}, {record.updated})"}
-
-
-def object_fingerprint(task: str, objects_dir: Path | None = None) -> str:
-    """A hash of the files of ``task``'s object, where the goals' envs load it from (None: the shipped set)."""
-    from sim_node.grasp_env import DEFAULT_OBJECTS_DIR
-
-    digest = hashlib.sha256()
-    folder = Path(objects_dir or DEFAULT_OBJECTS_DIR) / task
-    for path in sorted(folder.iterdir()):
-        if path.is_file():
-            digest.update(path.name.encode() + b"\0" + path.read_bytes() + b"\0")
-    return digest.hexdigest()[:16]
 
 
 class GoalLog:

@@ -109,8 +109,7 @@ def novel_objects(objects_dir: Path, per_third: int = 3, prefix: str | None = No
 
 def check_novel(objects: Sequence[NovelObject]) -> None:
     """``ValueError`` when one of ``objects`` is an object of the committed set, which every run trains on."""
-    from glocal_app.benches.cost import object_fingerprint
-    from glocal_ros.paths import objects_dir
+    from glocal_ros.paths import object_fingerprint, objects_dir
     from glocal_ros.tasks import ALL_TASKS
 
     committed = {object_fingerprint(task, objects_dir()): task for task in ALL_TASKS}

@@ -27,9 +27,9 @@ from multiprocessing import get_context
 from pathlib import Path
 from typing import Callable, Sequence
 
-from glocal_app.benches.cost import (GoalLog, check_cost, object_fingerprint, run_cost_map, run_key,
-                                     work_lock)
+from glocal_app.benches.cost import GoalLog, check_cost, run_cost_map, run_key, work_lock
 from glocal_app.benches.transfer import INITIAL_POLICY, PROFILE_RECIPE, TransferGoal, TransferSettings, run_chain
+from glocal_ros.paths import object_fingerprint
 from glocal_ros.tasks import DIFFICULTY_LEVELS, grid_coordinates, sorted_tasks
 from learner_node.profiles import DEFAULT_PROFILE
 
