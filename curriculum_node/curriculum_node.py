@@ -12,6 +12,11 @@ The run resumes: every answered learner call is journaled in ``state_dir``
 (``glocal_ros.curriculum.journal``), so a node started again with the same
 parameters and ``state_dir`` goes on where the last one stopped;
 ``state_dir/state.json`` holds the latest state for people and scripts.
+Replaying a long journal takes minutes (ALP-GMM-10 refits its sampler at
+each of thousands of answers), and nothing is published meanwhile (replayed
+decisions were published by the node that made them), so the replay reports
+itself on ``diagnostics`` (``diagnostic_msgs``; replayed calls of all, every
+``REPLAY_REPORT_SEC`` and at its end): the launcher's watchdog hears it.
 
 Several pairs: ``learner_namespaces`` (comma-separated, e.g.
 ``pair0,pair1``; default "", the learner in this node's own namespace) names
@@ -40,6 +45,7 @@ import traceback
 from dataclasses import MISSING, asdict, fields
 from pathlib import Path
 
+from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
 from glocal_interfaces.msg import CurriculumState, TaskAssignment, TaskCluster
 from rclpy.duration import Duration
 from rclpy.node import Node
@@ -52,6 +58,7 @@ from glocal_ros.sim_contract import DEFAULT_EPISODE_STEPS
 from glocal_ros.curriculum.run import Assignment, Run, RunConfig, RunState
 from glocal_ros.curriculum.strategies import STRATEGIES, run_strategy
 from glocal_ros.tasks import parse_task_list
+from glocal_ros.topics import REPLAY_STATUS
 from curriculum_node.ros_learner import LearnerStopped, RosLearner
 from node_common import names, qos
 from node_common.calls import ServiceCallError
@@ -62,6 +69,8 @@ from node_common.runner import spin_node
 #: match, then for them to acknowledge its latest state and assignment. Each wait has its own
 #: budget: a slow match on a loaded machine must not leave none for the acknowledgement.
 DRAIN_SEC = 20.0
+#: How often a replay reports its progress: well within the launcher's silence allowance.
+REPLAY_REPORT_SEC = 2.0
 
 _DEFAULTS = {f.name: f.default for f in fields(RunConfig) if f.default is not MISSING}
 
@@ -92,9 +101,13 @@ class CurriculumNode(Node):
         self.learners = [RosLearner(self, self.learner_timeout, namespace=namespace,
                                     away_sec=away if pooled else None)
                          for namespace in self.learner_namespaces]
-        self.journal = CallJournal(self.state_dir / "journal.jsonl", self.config.journal_settings())
+        self.diagnostics_pub = self.create_publisher(DiagnosticArray, names.DIAGNOSTICS, qos.EVENTS)
+        self._replay_reported = self._replay_started = time.monotonic()
+        self.journal = CallJournal(self.state_dir / "journal.jsonl", self.config.journal_settings(),
+                                   on_replayed=self.replayed)
         if self.journal.replaying:
-            self.get_logger().info(f"resuming {self.config.run_id} from {self.journal.path}")
+            self.get_logger().info(f"resuming {self.config.run_id} from {self.journal.path}: "
+                                   f"{self.journal.to_replay} answered calls to replay")
         self.exit_code = 0
         self._worker = threading.Thread(target=self.run, name="curriculum", daemon=True)
         self._worker.start()
@@ -179,6 +192,23 @@ class CurriculumNode(Node):
                 self.get_logger().warning(
                     f"{publisher.topic_name}: not every subscriber acknowledged the last message within "
                     f"{DRAIN_SEC:.0f} s; it may miss it")
+
+    def replayed(self, replayed: int, total: int) -> None:
+        """The journal's replay so far, on ``diagnostics`` (see the module doc)."""
+        now = time.monotonic()
+        if replayed < total and now - self._replay_reported < REPLAY_REPORT_SEC:
+            return
+        self._replay_reported = now
+        status = DiagnosticStatus(level=DiagnosticStatus.OK, name=f"{self.get_fully_qualified_name()}: {REPLAY_STATUS}",
+                                  message=f"resuming: replayed {replayed} of {total} answered calls",
+                                  values=[KeyValue(key="replayed", value=str(replayed)),
+                                          KeyValue(key="to_replay", value=str(total))])
+        message = DiagnosticArray(status=[status])
+        message.header.stamp = self.get_clock().now().to_msg()
+        self.diagnostics_pub.publish(message)
+        if replayed == total:
+            self.get_logger().info(f"replayed {total} answered calls in {now - self._replay_started:.0f} s; "
+                                   "live from here")
 
     # RunObserver: what the run reports, published. Replayed decisions were
     # published by the node that made them, so only live ones go out.

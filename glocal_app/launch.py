@@ -39,8 +39,9 @@ its namespace, another graph already uses (``check_names_free``).
 
 A watchdog stops a hung run instead of letting it wait: when a node process
 ends before the curriculum does, or nothing moves for ``watchdog_sec``
-(no episode, no training progress, no curriculum state: a running graph
-sends one of those every few seconds, evaluating or training), the launch
+(no episode, no training progress, no curriculum state, and before a resumed
+run's first state no report of its journal's replay: a running graph sends
+one of those every few seconds, evaluating or training), the launch
 says what it last heard, what the curriculum was waiting for and whether
 the learner still answers, stops the graph as Ctrl-C does, and exits with
 ``EXIT_STALLED``; the same command resumes the run.
@@ -58,6 +59,7 @@ from pathlib import Path
 from typing import Sequence
 
 import rclpy
+from diagnostic_msgs.msg import DiagnosticArray
 from glocal_interfaces.msg import CurriculumState, EpisodeRecord, TrainingProgress
 from glocal_interfaces.srv import ListPolicies
 from rclpy.node import Node
@@ -73,6 +75,7 @@ from glocal_app.provenance import record_code_version
 from glocal_ros.domain import Domain, choose_domain_id, domain_id_from_environment
 from glocal_ros.foxglove_layout import RUN_LAYOUT, write_layout
 from glocal_ros.recording import message_counts
+from glocal_ros.topics import REPLAY_STATUS
 from node_common import names, qos
 from node_common.runner import configure_discovery
 
@@ -88,6 +91,8 @@ DISCOVERY_SEC = 5.0
 LEARNER_PROBE_SEC = 5.0
 #: What the watchdog calls the curriculum's state: once heard, the run has started.
 CURRICULUM_HEARD = "curriculum state"
+#: A resumed curriculum replaying its journal, before its first state (``curriculum_node``'s diagnostics).
+REPLAY_HEARD = "curriculum replay"
 
 
 class GraphStalled(RuntimeError):
@@ -171,6 +176,11 @@ class Progress:
         self.state = state
         self.goal_steps.clear()
         self._draw()
+
+    def on_replay(self, message: str) -> None:
+        """A resumed curriculum's replay of its journal, shown until its first state."""
+        if self.state is None:
+            self.bar.set_postfix_str(message, refresh=True)
 
     def on_progress(self, progress: TrainingProgress, pair: str = "") -> None:
         self.progress = progress
@@ -442,6 +452,14 @@ def listen_for_progress(node, progress: Progress, watchdog: Watchdog, pairs: Seq
 
     node.create_subscription(CurriculumState, names.CURRICULUM_STATE, heard(CURRICULUM_HEARD, progress.on_state),
                              qos.LATCHED)
+
+    def on_diagnostics(message: DiagnosticArray) -> None:
+        for status in message.status:
+            if status.name.endswith(f": {REPLAY_STATUS}"):
+                watchdog.heard(REPLAY_HEARD)
+                progress.on_replay(status.message)
+
+    node.create_subscription(DiagnosticArray, names.DIAGNOSTICS, on_diagnostics, qos.EVENTS)
     for pair in pairs:
         source = f"{pair}: " if pair else ""
         node.create_subscription(

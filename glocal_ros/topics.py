@@ -82,6 +82,13 @@ GRAPH_TOPICS: tuple[TopicSpec, ...] = (
     EPISODES, CURRICULUM_STATE, TASK_ASSIGNMENT, TRAINING_PROGRESS, EVALUATIONS, JOINT_STATES, OBJECT_POSE,
     GRASP_STATE, ROBOT_DESCRIPTION, TF, TF_STATIC, OBJECT_MARKER, CLOCK,
 )
+#: The curriculum's replay of its journal when it resumes, as ROS diagnostics (``rqt_robot_monitor`` reads
+#: them at the root namespace): what the launcher's watchdog hears before the first state of a resumed run.
+#: Outside ``GRAPH_TOPICS``: neither recorded nor served to viewers.
+DIAGNOSTICS = TopicSpec("/diagnostics", "diagnostic_msgs/msg/DiagnosticArray", EVENTS_QOS, recorded=False,
+                        of_pair=False)
+#: The name of the replay's DiagnosticStatus, after its node's: ``/curriculum_node: journal replay``.
+REPLAY_STATUS = "journal replay"
 #: What recorder_node writes to a run's bag.
 RECORDED_TOPICS: tuple[TopicSpec, ...] = tuple(topic for topic in GRAPH_TOPICS if topic.recorded)
 

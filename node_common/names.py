@@ -26,3 +26,4 @@ TF = topics.TF.relative_name
 TF_STATIC = topics.TF_STATIC.relative_name
 OBJECT_MARKER = topics.OBJECT_MARKER.relative_name
 CLOCK = topics.CLOCK.relative_name
+DIAGNOSTICS = topics.DIAGNOSTICS.relative_name

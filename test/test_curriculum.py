@@ -392,10 +392,12 @@ def test_a_killed_run_resumes_from_its_journal(tmp_path, strategy):
         run_strategy(Run(cfg, DiesAfter(learner, 7), journal=CallJournal(journal, {"c": 1})))
     assert len(journal.read_text().splitlines()) == 1 + 7
 
-    journaled = CallJournal(journal, {"c": 1})
+    progress = []
+    journaled = CallJournal(journal, {"c": 1}, on_replayed=lambda replayed, total: progress.append((replayed, total)))
     resumed = Run(cfg, learner, journal=journaled)
     run_strategy(resumed)
     assert journaled.replayed == 7
+    assert progress == [(n, 7) for n in range(1, 8)]  # what the node reports while it replays
     assert resumed.state == uninterrupted.state
     assert len(learner.calls) == len(uninterrupted_learner.calls), "no call was asked twice"
 

@@ -284,6 +284,31 @@ def test_a_hung_learner_is_reported_the_graph_stopped_and_the_run_resumes(tmp_pa
     assert "report:" in resumed.stdout
 
 
+def test_the_watchdog_hears_a_resumed_curriculum_replaying_its_journal(ros_node):
+    """A resumed curriculum replays its journal before its first state (minutes for ALP-GMM-10 at paper
+    scale: thousands of sampler refits) and reports the replay on diagnostics: the watchdog hears it, the bar
+    shows it, and another node's diagnostics are not progress."""
+    from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus
+    from glocal_app.launch import REPLAY_HEARD, Progress, Watchdog, listen_for_progress
+    from glocal_ros.topics import REPLAY_STATUS
+    from node_common import names, qos
+
+    watchdog, progress = Watchdog(silence_sec=60.0), Progress()
+    listen_for_progress(ros_node, progress, watchdog)
+    publisher = ros_node.create_publisher(DiagnosticArray, names.DIAGNOSTICS, qos.EVENTS)
+    other = DiagnosticStatus(name="/camera_driver: frame rate", message="30 Hz")
+    replay = DiagnosticStatus(name=f"/curriculum_node: {REPLAY_STATUS}", message="resuming: replayed 5 of 9 answered calls")
+
+    def heard() -> bool:
+        publisher.publish(DiagnosticArray(status=[other, replay]))
+        return REPLAY_HEARD in watchdog.last_heard
+
+    wait_until(heard, 60, "the replay heard", poll=0.5)
+    assert set(watchdog.last_heard) == {REPLAY_HEARD}
+    assert "replayed 5 of 9" in str(progress.bar.postfix)
+    progress.close()
+
+
 def test_a_domain_id_the_user_set_is_kept_else_a_free_one_is_reserved():
     assert domain_id_from_environment({}) is None and domain_id_from_environment({"ROS_DOMAIN_ID": " "}) is None
     assert domain_id_from_environment({"ROS_DOMAIN_ID": "0"}) == 0

@@ -83,6 +83,7 @@ def test_a_run_whose_curriculum_node_was_killed_resumes_call_for_call(sim, unint
     finally:
         own_learner.stop()
     assert "resuming glocal-seed7" in second.log()
+    assert f"replayed {len(answered) - 1} answered calls in" in second.log()  # also reported on diagnostics
     resumed = journal(tmp_path)
     assert resumed[:len(answered)] == answered, "the journal was continued, not rewritten"
     assert_same_run(resumed, uninterrupted)

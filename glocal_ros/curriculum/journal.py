@@ -29,7 +29,7 @@ import json
 import os
 from dataclasses import asdict
 from pathlib import Path
-from typing import Any
+from typing import Any, Callable
 
 from glocal_ros.curriculum.learner import EpisodeSummary, TrainResult
 
@@ -41,18 +41,27 @@ class JournalMismatch(RuntimeError):
 class CallJournal:
     """A run's answered calls by key, in the order they came (see the module doc)."""
 
-    def __init__(self, path: Path, config: dict[str, Any]):
+    def __init__(self, path: Path, config: dict[str, Any], on_replayed: Callable[[int, int], None] | None = None):
+        """``on_replayed(replayed, total)`` is called after each entry replayed: a replay re-runs the
+        strategy from the start (ALP-GMM refits its sampler at every answer) and can take minutes."""
         self.path = Path(path)
         self._replay = _open_journal(self.path, config)
         self.replayed = 0
+        self.on_replayed = on_replayed
 
     @property
     def replaying(self) -> bool:
         return self.replayed < len(self._replay)
 
+    @property
+    def to_replay(self) -> int:
+        return len(self._replay)
+
     def next_entry(self) -> dict:
         entry = self._replay[self.replayed]
         self.replayed += 1
+        if self.on_replayed is not None:
+            self.on_replayed(self.replayed, len(self._replay))
         return entry
 
     def record(self, key: str, learner: int, name: str, arguments: dict, answer: Any, cost: dict[str, int]) -> None:
