@@ -153,4 +153,5 @@ def test_few_seeds_note_says_what_three_seeds_cannot() -> None:
     assert "the IQM trims none" in note and "3.7%" in note and "min to max" in note and "weak evidence" in note
     assert "min to max" not in few_seeds_note(3, confidence=0.9)  # 3.7% is below 5%
     assert few_seeds_note(4) == ""
+    assert few_seeds_note(1).startswith("Few seeds: with 1 run a strategy's IQM is that run and its interval the run")
     assert few_seeds_note(0) == "" and few_seeds_note(10) == ""

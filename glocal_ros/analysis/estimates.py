@@ -214,8 +214,11 @@ def few_seeds_note(fewest_runs: int, confidence: float = CONFIDENCE) -> str:
     if not 0 < fewest_runs < 4:
         return ""
     repeat = float(fewest_runs) ** -fewest_runs
-    notes = [f"with {fewest_runs} runs the IQM trims none (it cuts int(n/4) from each end) and is the mean"]
-    if repeat > (1 - confidence) / 2:
+    if fewest_runs == 1:
+        notes = ["with 1 run a strategy's IQM is that run and its interval the run itself: no estimate yet"]
+    else:
+        notes = [f"with {fewest_runs} runs the IQM trims none (it cuts int(n/4) from each end) and is the mean"]
+    if 1 < fewest_runs and repeat > (1 - confidence) / 2:
         notes.append(f"a resample repeating one run {fewest_runs} times has probability {fewest_runs}^-{fewest_runs} "
                      f"= {repeat:.1%}, above {(1 - confidence) / 2:.1%}, so the {confidence:.0%} interval of the IQM "
                      "is the runs' min to max: it shows how far apart the seeds are, not a precise estimate")
