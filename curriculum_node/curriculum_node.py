@@ -102,7 +102,7 @@ class CurriculumNode(Node):
                                     away_sec=away if pooled else None)
                          for namespace in self.learner_namespaces]
         self.diagnostics_pub = self.create_publisher(DiagnosticArray, names.DIAGNOSTICS, qos.EVENTS)
-        self._replay_reported = self._replay_started = time.monotonic()
+        self._replay_reported = self._replay_started = 0.0  # set by the first replayed call
         self.journal = CallJournal(self.state_dir / "journal.jsonl", self.config.journal_settings(),
                                    on_replayed=self.replayed)
         if self.journal.replaying:
@@ -196,10 +196,13 @@ class CurriculumNode(Node):
     def replayed(self, replayed: int, total: int) -> None:
         """The journal's replay so far, on ``diagnostics`` (see the module doc)."""
         now = time.monotonic()
-        if replayed < total and now - self._replay_reported < REPLAY_REPORT_SEC:
+        if replayed == 1:  # the replay starts once the learners are ready, not when the node does
+            self._replay_started = now
+        elif replayed < total and now - self._replay_reported < REPLAY_REPORT_SEC:
             return
         self._replay_reported = now
-        status = DiagnosticStatus(level=DiagnosticStatus.OK, name=f"{self.get_fully_qualified_name()}: {REPLAY_STATUS}",
+        status = DiagnosticStatus(level=DiagnosticStatus.OK,
+                                  name=f"{self.get_fully_qualified_name()}: {REPLAY_STATUS}",
                                   message=f"resuming: replayed {replayed} of {total} answered calls",
                                   values=[KeyValue(key="replayed", value=str(replayed)),
                                           KeyValue(key="to_replay", value=str(total))])

@@ -31,6 +31,8 @@ from glocal_ros.analysis.scale import (
     CallCost, CallModel, RecordedRun, fit_model, predicted_segments, read_recorded_run, schedule, simulate,
     time_calls, with_pairs,
 )
+from glocal_ros.curriculum.run import RunConfig
+from glocal_ros.curriculum.strategies import ALP_GMM_FIT_RATES
 
 DEFAULT_PAIRS = (1, 2, 4, 8)
 DEFAULT_MACHINES = (1, 10, 40)
@@ -67,8 +69,9 @@ def _baseline(strategy: str, episodes_per_goal: int) -> PaperRun:
                     int(100 * evaluations * (49 + 8) / 2))
 
 
-PAPER_GRID = (_glocal_like("glocal"), _baseline("random", 100), _baseline("alp_gmm_250", 250),
-              _baseline("alp_gmm_10", 10), _glocal_like("glocal_no_global"), _glocal_like("glocal_random_cluster"))
+PAPER_GRID = (_glocal_like("glocal"), _baseline("random", RunConfig.baseline_chunk_episodes),
+              *(_baseline(name, rate) for name, rate in ALP_GMM_FIT_RATES.items()),
+              _glocal_like("glocal_no_global"), _glocal_like("glocal_random_cluster"))
 
 
 def max_episode_steps(run_dir: Path) -> int:

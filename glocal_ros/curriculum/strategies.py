@@ -9,12 +9,15 @@ from glocal_ros.curriculum.glocal import run_glocal
 from glocal_ros.curriculum.run import Run
 from glocal_ros.sim_contract import DEFAULT_EPISODE_STEPS
 
+#: The ALP-GMM baselines by name: episodes between refits of the sampler (each goal is one such chunk).
+ALP_GMM_FIT_RATES = {"alp_gmm_250": 250, "alp_gmm_10": 10}
+
 #: name -> ``strategy(run, max_episode_steps)``.
 STRATEGIES: dict[str, Callable[[Run, int], None]] = {
     "glocal": lambda run, max_episode_steps: run_glocal(run),
     "random": run_random,
-    "alp_gmm_250": lambda run, max_episode_steps: run_alp_gmm(run, 250, max_episode_steps),
-    "alp_gmm_10": lambda run, max_episode_steps: run_alp_gmm(run, 10, max_episode_steps),
+    **{name: lambda run, max_episode_steps, rate=rate: run_alp_gmm(run, rate, max_episode_steps)
+       for name, rate in ALP_GMM_FIT_RATES.items()},
     "glocal_no_global": lambda run, max_episode_steps: run_glocal(run, "no_global"),
     "glocal_random_cluster": lambda run, max_episode_steps: run_glocal(run, "random_cluster"),
 }
