@@ -19,6 +19,7 @@ from glocal_app.arguments import (
     run_options,
 )
 from glocal_app.benches import cost as cost_bench
+from glocal_app.benches import fewshot as fewshot_bench
 from glocal_app.benches.curriculum import BENCH_PRESET, DEFAULT_OUT, DEFAULT_RESULTS
 from glocal_app.benches.transfer import (
     INITIAL_POLICY,
@@ -101,13 +102,31 @@ def cmd_bench_graph(args: argparse.Namespace) -> int:
 
 
 def cmd_bench_fewshot(args: argparse.Namespace) -> int:
-    from glocal_app.benches.fewshot import fewshot_report, run_fewshot_bench
+    from glocal_app.benches.fewshot import (CASES_FILE, fewshot_report, fewshot_selection, held_cases,
+                                            run_fewshot_bench)
 
     settings = TransferSettings(step_budget=args.budget, eval_interval=args.eval_interval,
                                 eval_episodes=args.eval_episodes, num_envs=args.envs)
-    cases = run_fewshot_bench(args.runs, args.objects, [int(seed) for seed in args.seeds.split(",")], settings,
-                              args.per_third)
-    return write_bench_report(fewshot_report(cases, command_line(), settings, args.objects), args.out)
+    seeds = [int(seed) for seed in args.seeds.split(",")]
+    if args.tabulate:
+        runs, objects = fewshot_selection(args.runs, args.objects, seeds, settings, args.per_third)
+        held = held_cases(args.work_dir, settings, objects)
+        selection = [(run.run_id, novel.name, seed) for run in runs for seed in seeds for novel in objects]
+        cases = [held[case] for case in selection if case in held]
+        if not cases:
+            print(f"bench fewshot --tabulate: no finished case of these runs, objects and seeds in "
+                  f"{args.work_dir / CASES_FILE}", file=sys.stderr)
+            return EXIT_FAILED
+        report = fewshot_report(cases, command_line(), settings, args.objects, args.work_dir, selected=len(selection))
+        return write_bench_report(report, args.out)
+    try:
+        cases = run_fewshot_bench(args.runs, args.objects, seeds, settings, args.per_third, args.work_dir, args.jobs)
+    except KeyboardInterrupt:
+        print(f"bench fewshot: interrupted; the finished cases are kept in {args.work_dir / CASES_FILE}: the same "
+              "command resumes", file=sys.stderr)
+        return EXIT_INTERRUPTED
+    return write_bench_report(fewshot_report(cases, command_line(), settings, args.objects, args.work_dir, args.jobs),
+                              args.out)
 
 
 def cmd_bench_transfer(args: argparse.Namespace) -> int:
@@ -362,6 +381,12 @@ def add_bench_commands(commands) -> None:
     bench_fewshot.add_argument("--eval-interval", type=int, default=2_000)
     bench_fewshot.add_argument("--eval-episodes", type=int, default=20, help="S-bar; B is 75%% of it")
     bench_fewshot.add_argument("--envs", type=int, default=transfer_defaults.num_envs, help="envs N per goal")
+    bench_fewshot.add_argument("--jobs", type=count(1), default=1, help="cases at a time, each in a process")
+    bench_fewshot.add_argument("--work-dir", type=Path, default=fewshot_bench.DEFAULT_WORK_DIR,
+                               help=f"where each finished case is kept ({fewshot_bench.DEFAULT_WORK_DIR}/"
+                               f"{fewshot_bench.CASES_FILE}): the same command resumes")
+    bench_fewshot.add_argument("--tabulate", action="store_true",
+                               help="report the cases the work directory holds; run nothing")
     bench_fewshot.add_argument("--out", type=Path, default=Path("bench/results/fewshot.md"))
     bench_fewshot.set_defaults(func=cmd_bench_fewshot)
     bench_transfer = bench_commands.add_parser(

@@ -14,6 +14,7 @@ import shutil
 import subprocess
 import sys
 import time
+from dataclasses import replace
 from pathlib import Path
 
 import pytest
@@ -218,6 +219,21 @@ def test_adapt_refuses_what_it_cannot_use_and_adapts_a_runs_policies_to_a_genera
     assert (case.goals["adapt's choice"] is case.goals["prior"]) == (case.chosen == "prior")
     report = fewshot_report([case], "bench fewshot", settings, objects_dir())
     assert "| glocal-seed5 | glocal_ros | hard | 1 |" in report and case.object.name in report
+
+    # Kept as bench fewshot keeps a finished case, and read back whole (its shared goal shared again); a work
+    # directory of other settings, or whose object has changed since, is refused.
+    from glocal_app.benches.fewshot import CaseLog, case_key, case_record, held_cases
+
+    work = tmp_path / "fewshot"
+    work.mkdir()
+    CaseLog(work).append(case_record(case, case_key(settings)))
+    (held,) = held_cases(work, settings, [case.object]).values()
+    assert held == case
+    assert (held.goals["adapt's choice"] is held.goals["prior"]) == (case.chosen == "prior")
+    with pytest.raises(ValueError, match=r"other settings \(step_budget 40 \(now 60\)\)"):
+        held_cases(work, replace(settings, step_budget=60))
+    with pytest.raises(ValueError, match=f"the object {case.object.name} has changed"):
+        held_cases(work, settings, [replace(case.object, source=objects_dir() / "G6")])
 
 
 def test_ctrl_c_leaves_a_valid_bag_and_the_same_command_resumes(tmp_path):

@@ -21,6 +21,14 @@ did not use, its lifting-pose shares measured (``assets lifting-poses``);
 high: hard to easy), evenly spaced in the third, each named ``<set>_<TASK>``
 (``glocal_ros.tasks``: a novel object's name) and prepared as ``adapt``
 prepares an object directory (``prepare_object``).
+
+Resumable as ``bench cost`` is (its ``GoalLog`` and ``work_lock``): the cases
+run ``jobs`` at a time in spawned workers, each appended, one JSON line, to
+``cases.jsonl`` in the work directory as it finishes; the same command skips
+the cases found there, and ``--tabulate`` reports them without running
+anything. Each line carries the settings that decide its goals and a hash of
+its object's files: a work directory of other settings, or whose objects have
+since changed, is refused before any case runs.
 """
 
 from __future__ import annotations
@@ -31,15 +39,20 @@ import statistics
 import sys
 import tempfile
 import time
+from concurrent.futures import ProcessPoolExecutor, as_completed
 from dataclasses import dataclass, replace
+from multiprocessing import get_context
 from pathlib import Path
 from typing import Callable, Sequence
 
+from glocal_app.benches.cost import GoalLog, work_lock
 from glocal_app.benches.transfer import PROFILE_RECIPE, TransferGoal, TransferSettings
 
 #: The arms: where a goal starts.
 ARMS = ("adapt's choice", "prior", "last")
 THIRDS = ("hard", "middle", "easy")
+CASES_FILE = "cases.jsonl"
+DEFAULT_WORK_DIR = Path("runs/bench-fewshot")
 
 
 @dataclass(frozen=True)
@@ -193,16 +206,128 @@ def _case_line(case: FewshotCase) -> str:
             f"B " + ", ".join(f"{arm} {_steps(case.goals.get(arm))}" for arm in ARMS))
 
 
-def run_fewshot_bench(run_dirs: Sequence[Path], objects_dir: Path, seeds: Sequence[int], settings: TransferSettings,
-                      per_third: int = 3, log: Callable[[str], None] = print) -> list[FewshotCase]:
-    """Every run x object x seed (``ValueError`` before any goal for a run or a set it cannot use)."""
+class CaseLog(GoalLog):
+    """``cases.jsonl``: one JSON line per finished case (``GoalLog``'s rules for torn lines)."""
+
+    FILE = CASES_FILE
+    FIELDS = frozenset({"run", "profile", "object", "seed", "scores", "chosen", "goals", "arms", "key"})
+    WHAT = "a case of bench fewshot"
+
+
+def case_key(settings: TransferSettings) -> dict:
+    """What, besides its run, object and seed, decides a case: a case of another key is not this bench's."""
+    return {"step_budget": settings.step_budget, "eval_interval": settings.eval_interval,
+            "eval_episodes": settings.eval_episodes, "threshold": settings.threshold,
+            "num_envs": settings.num_envs}
+
+
+def _fingerprint(novel: NovelObject) -> str:
+    from glocal_ros.paths import object_fingerprint
+
+    return object_fingerprint(novel.source.name, novel.source.parent)
+
+
+def case_record(case: FewshotCase, key: dict) -> dict:
+    """One line of ``cases.jsonl``; arms that shared a goal share it again when read back."""
+    goals = list({id(goal): goal for goal in case.goals.values()}.values())
+    novel = case.object
+    return {"run": case.run, "profile": case.profile, "seed": case.seed, "chosen": case.chosen,
+            "object": {"name": novel.name, "source": str(novel.source), "third": novel.third,
+                       "lifting_pose_share": novel.lifting_pose_share, "fingerprint": _fingerprint(novel)},
+            "scores": [list(score) for score in case.scores],
+            "goals": [{"recipe": goal.recipe, "task": goal.task, "prior": goal.prior, "profile": goal.profile,
+                       "curve": [list(point) for point in goal.curve], "wall_s": goal.wall_s,
+                       "instruments": [[steps, values] for steps, values in goal.instruments]} for goal in goals],
+            "arms": {arm: next(i for i, goal in enumerate(goals) if goal is case.goals[arm]) for arm in case.goals},
+            "key": key}
+
+
+def case_of_record(record: dict, settings: TransferSettings) -> FewshotCase:
+    seed = int(record["seed"])
+    goals = [TransferGoal(goal["recipe"], goal["task"], seed, tuple(tuple(point) for point in goal["curve"]),
+                          settings.eval_episodes, settings.threshold, float(goal["wall_s"]), goal["prior"],
+                          goal["profile"], tuple((int(steps), dict(values)) for steps, values in goal["instruments"]))
+             for goal in record["goals"]]
+    novel = record["object"]
+    return FewshotCase(record["run"], record["profile"],
+                       NovelObject(novel["name"], Path(novel["source"]), float(novel["lifting_pose_share"]),
+                                   novel["third"]),
+                       seed, tuple((policy, proxy, float(score)) for policy, proxy, score in record["scores"]),
+                       record["chosen"], {arm: goals[index] for arm, index in record["arms"].items()})
+
+
+def held_cases(work_dir: Path, settings: TransferSettings,
+               objects: Sequence[NovelObject] = ()) -> dict[tuple[str, str, int], FewshotCase]:
+    """The cases ``work_dir`` holds, by (run, object, seed); ``ValueError`` when any is of other settings, or
+    of one of ``objects`` whose files have changed since."""
+    log = CaseLog(work_dir)
+    key, fingerprints, cases = case_key(settings), {novel.name: _fingerprint(novel) for novel in objects}, {}
+    for number, record in enumerate(log.records(), 1):
+        if record["key"] != key:
+            theirs = record["key"] if isinstance(record["key"], dict) else {}
+            differ = ", ".join(f"{name} {theirs.get(name)} (now {value})" for name, value in key.items()
+                               if theirs.get(name) != value)
+            raise ValueError(f"{log.path} holds cases of other settings ({differ}): run with those, or choose "
+                             "another --work-dir")
+        case = case_of_record(record, settings)
+        if fingerprints.get(case.object.name, record["object"]["fingerprint"]) != record["object"]["fingerprint"]:
+            raise ValueError(f"the object {case.object.name} has changed since its cases in {log.path} ran (set "
+                             "regenerated?): choose another --work-dir")
+        if (case.run, case.object.name, case.seed) in cases:
+            raise ValueError(f"{log.path}, line {number}: {case.run} {case.object.name} seed {case.seed} is in it "
+                             "twice")
+        cases[(case.run, case.object.name, case.seed)] = case
+    return cases
+
+
+def fewshot_selection(run_dirs: Sequence[Path], objects_dir: Path, seeds: Sequence[int], settings: TransferSettings,
+                      per_third: int = 3) -> tuple[list[FewshotRun], list[NovelObject]]:
+    """The runs and objects of a bench; ``ValueError`` before any case for a run or a set it cannot use."""
     settings.check()
     objects = novel_objects(objects_dir, per_third)
     check_novel(objects)
     runs = [read_run(path) for path in run_dirs]
     if not seeds or len(set(seeds)) != len(seeds):
         raise ValueError(f"seeds must be given once each, got {list(seeds)}")
-    return [run_case(run, novel, seed, settings, log) for run in runs for novel in objects for seed in seeds]
+    return runs, objects
+
+
+def _quiet(_: str) -> None:
+    """A worker's log: the bench prints each case as it is kept."""
+
+
+def run_fewshot_bench(run_dirs: Sequence[Path], objects_dir: Path, seeds: Sequence[int], settings: TransferSettings,
+                      per_third: int = 3, work_dir: Path = DEFAULT_WORK_DIR, jobs: int = 1,
+                      log: Callable[[str], None] = print) -> list[FewshotCase]:
+    """Every run x object x seed that ``work_dir`` does not hold yet, ``jobs`` at a time in spawned workers, each
+    kept as it finishes; then every case of the selection, seed by seed, hard objects first."""
+    runs, objects = fewshot_selection(run_dirs, objects_dir, seeds, settings, per_third)
+    if jobs < 1:
+        raise ValueError(f"jobs must be at least 1, got {jobs}")
+    held_cases(work_dir, settings, objects)  # refuse other settings before anything is created in it
+    with work_lock(work_dir):
+        case_log = CaseLog(work_dir)
+        case_log.drop_torn_line()
+        done = held_cases(work_dir, settings, objects)
+        selection = [(run, novel, seed) for run in runs for seed in seeds for novel in objects]
+        pending = [(run, novel, seed) for run, novel, seed in selection if (run.run_id, novel.name, seed) not in done]
+        log(f"bench fewshot: {len(selection) - len(pending)} of {len(selection)} cases finished before (in "
+            f"{case_log.path}), {len(pending)} to run, {min(jobs, len(pending))} at a time")
+        if pending:
+            key = case_key(settings)
+            # Spawned workers: pybullet, torch and JAX do not survive a fork of a process that uses them.
+            with ProcessPoolExecutor(max_workers=min(jobs, len(pending)), mp_context=get_context("spawn")) as pool:
+                futures = [pool.submit(run_case, run, novel, seed, settings, _quiet) for run, novel, seed in pending]
+                try:
+                    for finished, future in enumerate(as_completed(futures), 1):
+                        case = future.result()
+                        case_log.append(case_record(case, key))
+                        done[(case.run, case.object.name, case.seed)] = case
+                        log(f"[{finished}/{len(pending)}] {_case_line(case)}")
+                except BaseException:  # a failed case or Ctrl-C: start nothing more; what finished is kept
+                    pool.shutdown(wait=False, cancel_futures=True)
+                    raise
+    return [done[(run.run_id, novel.name, seed)] for run, novel, seed in selection]
 
 
 def _median(values: Sequence[float]) -> str:
@@ -212,15 +337,27 @@ def _median(values: Sequence[float]) -> str:
     return "never" if math.isinf(median) else f"{median:.0f}"
 
 
-def fewshot_report(cases: Sequence[FewshotCase], command: str, settings: TransferSettings, objects_dir: Path) -> str:
-    """The table: median steps to B per arm and difficulty third, then every case."""
+def fewshot_report(cases: Sequence[FewshotCase], command: str, settings: TransferSettings, objects_dir: Path,
+                   work_dir: Path | None = None, jobs: int = 1, selected: int | None = None) -> str:
+    """The table: median steps to B per arm and difficulty third, then every case. ``work_dir``: where the cases
+    are kept; ``selected``: the selection's cases, when ``cases`` are only those of them already held
+    (``--tabulate``)."""
     runs = list(dict.fromkeys((case.run, case.profile) for case in cases))
+    if work_dir is None:
+        provenance = ""
+    elif selected is not None:
+        provenance = (f"Tabulated from `{work_dir / CASES_FILE}`, nothing run: {len(cases)} of the selection's "
+                      f"{selected} cases finished. ")
+    else:
+        provenance = (f"In-process, {jobs} case{'s' if jobs != 1 else ''} at a time, cases kept in "
+                      f"`{work_dir / CASES_FILE}`. ")
     lines = [
         "# bench fewshot: novel objects from a run's global policies, from the prior, from its last policy",
         "",
         f"Command: `{command}`  ",
         f"{time.strftime('%Y-%m-%d %H:%M')}, Python {sys.version.split()[0]}, {os.cpu_count()} CPU cores, "
-        f"load average at the end {os.getloadavg()[0]:.1f} (the machine is shared). Objects from `{objects_dir}`, "
+        f"load average at the end {os.getloadavg()[0]:.1f} (the machine is shared). {provenance}"
+        f"Objects from `{objects_dir}`, "
         f"by thirds of their lifting-pose shares (hard: the lowest). Per run, object and seed: every candidate "
         f"scored on the object under its own task's bit over {settings.eval_episodes} seeded episodes, then one "
         f"Train goal per arm on {settings.num_envs} envs, scored every {settings.eval_interval} steps, stopped at "
