@@ -110,7 +110,7 @@ def cmd_bench_fewshot(args: argparse.Namespace) -> int:
     seeds = [int(seed) for seed in args.seeds.split(",")]
     if args.tabulate:
         runs, objects = fewshot_selection(args.runs, args.objects, seeds, settings, args.per_third)
-        held = held_cases(args.work_dir, settings, objects)
+        held = held_cases(args.work_dir, settings, objects, runs)
         selection = [(run.run_id, novel.name, seed) for run in runs for seed in seeds for novel in objects]
         cases = [held[case] for case in selection if case in held]
         if not cases:

@@ -228,12 +228,14 @@ def test_adapt_refuses_what_it_cannot_use_and_adapts_a_runs_policies_to_a_genera
     work.mkdir()
     CaseLog(work).append(case_record(case, case_key(settings)))
     (held,) = held_cases(work, settings, [case.object]).values()
-    assert held == case
+    assert held == case and held.run_fingerprint == run.fingerprint != ""
     assert (held.goals["adapt's choice"] is held.goals["prior"]) == (case.chosen == "prior")
     with pytest.raises(ValueError, match=r"other settings \(step_budget 40 \(now 60\)\)"):
         held_cases(work, replace(settings, step_budget=60))
     with pytest.raises(ValueError, match=f"the object {case.object.name} has changed"):
         held_cases(work, settings, [replace(case.object, source=objects_dir() / "G6")])
+    with pytest.raises(ValueError, match="cases of another run named glocal-seed5"):
+        held_cases(work, settings, runs=[replace(run, fingerprint="0" * 16)])
 
 
 def test_ctrl_c_leaves_a_valid_bag_and_the_same_command_resumes(tmp_path):

@@ -33,6 +33,7 @@ since changed, is refused before any case runs.
 
 from __future__ import annotations
 
+import hashlib
 import math
 import os
 import statistics
@@ -63,6 +64,9 @@ class FewshotRun:
     run_id: str
     profile: str
     candidates: tuple  # glocal_ros.adaptation.Candidate, in run_candidates' order
+    #: A hash of its own candidates' weights: two runs of one id (``make run``'s demo and a bench run are both
+    #: glocal-seed0) are told apart in a work directory.
+    fingerprint: str = ""
 
 
 @dataclass(frozen=True)
@@ -84,6 +88,7 @@ class FewshotCase:
     scores: tuple[tuple[str, str, float], ...]  # (policy, proxy, score), in the candidates' order
     chosen: str
     goals: dict  # arm -> TransferGoal
+    run_fingerprint: str = ""  # FewshotRun's
 
 
 def read_run(run_dir: Path) -> FewshotRun:
@@ -92,9 +97,15 @@ def read_run(run_dir: Path) -> FewshotRun:
     from glocal_ros.adaptation import run_candidates
 
     options, run = run_summary(Path(run_dir))
-    candidates = run_candidates(run["run_id"], run["strategy"], stored_tasks(Path(run_dir) / "policies"),
+    policies = Path(run_dir) / "policies"
+    candidates = run_candidates(run["run_id"], run["strategy"], stored_tasks(policies),
                                 run.get("current_policy", ""), run["initial_policy"])
-    return FewshotRun(Path(run_dir), run["run_id"], run_profile(options), tuple(candidates))
+    digest = hashlib.sha256()
+    for candidate in candidates:  # the weights only: adapt rewrites a candidate's record with its new score
+        for path in sorted((policies / candidate.policy).glob("model-*")):
+            digest.update(f"{candidate.policy}/{path.name}".encode() + b"\0" + path.read_bytes() + b"\0")
+    return FewshotRun(Path(run_dir), run["run_id"], run_profile(options), tuple(candidates),
+                      digest.hexdigest()[:16])
 
 
 def novel_objects(objects_dir: Path, per_third: int = 3, prefix: str | None = None) -> list[NovelObject]:
@@ -192,7 +203,7 @@ def run_case(run: FewshotRun, novel: NovelObject, seed: int, settings: TransferS
                 ran[start] = run_goal(PROFILE_RECIPE, start.policy, novel_task(novel.name, start.proxy), seed,
                                       goal_settings, prior_store=run.path / "policies", profile=run.profile)
             goals[arm] = ran[start]
-    case = FewshotCase(run.run_id, run.profile, novel, seed, tuple(scores), chosen.policy, goals)
+    case = FewshotCase(run.run_id, run.profile, novel, seed, tuple(scores), chosen.policy, goals, run.fingerprint)
     log(_case_line(case))
     return case
 
@@ -210,7 +221,8 @@ class CaseLog(GoalLog):
     """``cases.jsonl``: one JSON line per finished case (``GoalLog``'s rules for torn lines)."""
 
     FILE = CASES_FILE
-    FIELDS = frozenset({"run", "profile", "object", "seed", "scores", "chosen", "goals", "arms", "key"})
+    FIELDS = frozenset({"run", "run_fingerprint", "profile", "object", "seed", "scores", "chosen", "goals", "arms",
+                        "key"})
     WHAT = "a case of bench fewshot"
 
 
@@ -231,7 +243,8 @@ def case_record(case: FewshotCase, key: dict) -> dict:
     """One line of ``cases.jsonl``; arms that shared a goal share it again when read back."""
     goals = list({id(goal): goal for goal in case.goals.values()}.values())
     novel = case.object
-    return {"run": case.run, "profile": case.profile, "seed": case.seed, "chosen": case.chosen,
+    return {"run": case.run, "run_fingerprint": case.run_fingerprint, "profile": case.profile, "seed": case.seed,
+            "chosen": case.chosen,
             "object": {"name": novel.name, "source": str(novel.source), "third": novel.third,
                        "lifting_pose_share": novel.lifting_pose_share, "fingerprint": _fingerprint(novel)},
             "scores": [list(score) for score in case.scores],
@@ -253,15 +266,17 @@ def case_of_record(record: dict, settings: TransferSettings) -> FewshotCase:
                        NovelObject(novel["name"], Path(novel["source"]), float(novel["lifting_pose_share"]),
                                    novel["third"]),
                        seed, tuple((policy, proxy, float(score)) for policy, proxy, score in record["scores"]),
-                       record["chosen"], {arm: goals[index] for arm, index in record["arms"].items()})
+                       record["chosen"], {arm: goals[index] for arm, index in record["arms"].items()},
+                       record["run_fingerprint"])
 
 
-def held_cases(work_dir: Path, settings: TransferSettings,
-               objects: Sequence[NovelObject] = ()) -> dict[tuple[str, str, int], FewshotCase]:
-    """The cases ``work_dir`` holds, by (run, object, seed); ``ValueError`` when any is of other settings, or
-    of one of ``objects`` whose files have changed since."""
+def held_cases(work_dir: Path, settings: TransferSettings, objects: Sequence[NovelObject] = (),
+               runs: Sequence[FewshotRun] = ()) -> dict[tuple[str, str, int], FewshotCase]:
+    """The cases ``work_dir`` holds, by (run, object, seed); ``ValueError`` when any is of other settings, of
+    one of ``objects`` whose files have changed since, or of another run than the one of ``runs`` of its id."""
     log = CaseLog(work_dir)
     key, fingerprints, cases = case_key(settings), {novel.name: _fingerprint(novel) for novel in objects}, {}
+    run_fingerprints = {run.run_id: run.fingerprint for run in runs}
     for number, record in enumerate(log.records(), 1):
         if record["key"] != key:
             theirs = record["key"] if isinstance(record["key"], dict) else {}
@@ -273,6 +288,9 @@ def held_cases(work_dir: Path, settings: TransferSettings,
         if fingerprints.get(case.object.name, record["object"]["fingerprint"]) != record["object"]["fingerprint"]:
             raise ValueError(f"the object {case.object.name} has changed since its cases in {log.path} ran (set "
                              "regenerated?): choose another --work-dir")
+        if run_fingerprints.get(case.run, case.run_fingerprint) != case.run_fingerprint:
+            raise ValueError(f"{log.path} holds cases of another run named {case.run} (other weights): choose "
+                             "another --work-dir")
         if (case.run, case.object.name, case.seed) in cases:
             raise ValueError(f"{log.path}, line {number}: {case.run} {case.object.name} seed {case.seed} is in it "
                              "twice")
@@ -287,6 +305,10 @@ def fewshot_selection(run_dirs: Sequence[Path], objects_dir: Path, seeds: Sequen
     objects = novel_objects(objects_dir, per_third)
     check_novel(objects)
     runs = [read_run(path) for path in run_dirs]
+    named = [run.run_id for run in runs]
+    if len(set(named)) != len(named):
+        repeated = next(name for name in named if named.count(name) > 1)
+        raise ValueError(f"two runs named {repeated}: give them to separate benches (each its own --work-dir)")
     if not seeds or len(set(seeds)) != len(seeds):
         raise ValueError(f"seeds must be given once each, got {list(seeds)}")
     return runs, objects
@@ -304,11 +326,11 @@ def run_fewshot_bench(run_dirs: Sequence[Path], objects_dir: Path, seeds: Sequen
     runs, objects = fewshot_selection(run_dirs, objects_dir, seeds, settings, per_third)
     if jobs < 1:
         raise ValueError(f"jobs must be at least 1, got {jobs}")
-    held_cases(work_dir, settings, objects)  # refuse other settings before anything is created in it
+    held_cases(work_dir, settings, objects, runs)  # refuse other settings before anything is created in it
     with work_lock(work_dir):
         case_log = CaseLog(work_dir)
         case_log.drop_torn_line()
-        done = held_cases(work_dir, settings, objects)
+        done = held_cases(work_dir, settings, objects, runs)
         selection = [(run, novel, seed) for run in runs for seed in seeds for novel in objects]
         pending = [(run, novel, seed) for run, novel, seed in selection if (run.run_id, novel.name, seed) not in done]
         log(f"bench fewshot: {len(selection) - len(pending)} of {len(selection)} cases finished before (in "
