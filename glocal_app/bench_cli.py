@@ -180,8 +180,8 @@ def cmd_bench_cost(args: argparse.Namespace) -> int:
     tasks = select_tasks(args.tasks)
     command = command_line()
     if args.tabulate:
-        check_cost(tasks, args.seeds, settings, args.jobs, args.learner_profile, args.prior_store)
-        held = finished_goals(args.work_dir, settings, args.learner_profile, args.prior_store)
+        check_cost(tasks, args.seeds, settings, args.jobs, args.learner_profile, args.prior_store, args.recipe)
+        held = finished_goals(args.work_dir, settings, args.learner_profile, args.prior_store, args.recipe)
         goals = [held[(task, seed)] for task in tasks for seed in args.seeds if (task, seed) in held]
         if not goals:
             print(f"bench cost --tabulate: no finished goal of these tasks and seeds in {args.work_dir / GOALS_FILE}",
@@ -190,14 +190,14 @@ def cmd_bench_cost(args: argparse.Namespace) -> int:
     else:
         try:
             goals = run_cost_map(tasks, args.seeds, settings, args.work_dir, args.jobs, args.learner_profile,
-                                 prior_store=args.prior_store)
+                                 prior_store=args.prior_store, recipe=args.recipe)
         except KeyboardInterrupt:
             print(f"bench cost: interrupted; the finished goals are kept in {args.work_dir / GOALS_FILE}: the same "
                   "command resumes", file=sys.stderr)
             return EXIT_INTERRUPTED
     figure = cost_figure(goals, settings, args.out.with_suffix(".png"))
     report = cost_report(goals, command, settings, tasks, args.seeds, args.jobs, figure, args.work_dir,
-                         tabulated=args.tabulate, profile=args.learner_profile)
+                         tabulated=args.tabulate, profile=args.learner_profile, recipe=args.recipe)
     write_bench_report(report, args.out)
     print(f"figure: {figure}")
     return EXIT_OK
@@ -428,6 +428,9 @@ def add_bench_commands(commands) -> None:
                             help=f"all, per-row:K (K objects per row, every column covered), or comma-separated "
                                  f"tasks (default: {cost_bench.DEFAULT_TASKS})")
     _add_cost_goal_arguments(bench_cost, transfer_defaults.num_envs)
+    bench_cost.add_argument("--recipe", default=PROFILE_RECIPE,
+                            help=f"the goals' fine-tuning recipe: {PROFILE_RECIPE} (the profile's own) or one of "
+                                 f"{', '.join(FINE_TUNING_RECIPES)}")
     bench_cost.add_argument("--tabulate", action="store_true",
                             help="run nothing: report the goals of these tasks and seeds that --work-dir holds "
                                  "(same settings)")

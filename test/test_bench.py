@@ -410,6 +410,30 @@ def test_a_cost_map_from_another_prior_store_is_another_map(tmp_path):
         finished_goals(tmp_path / "work", settings, prior_store=store)
 
 
+def test_a_cost_map_of_another_recipe_is_another_map(tmp_path):
+    """A map per fine-tuning recipe (issue 45's remedies on every object): the profile's own recipe keeps the
+    key maps had before recipes could be chosen, another recipe is named in it, and each refuses the other's
+    goals; a recipe the learner does not know is refused before anything runs."""
+    from glocal_app.benches.cost import (GoalLog, check_cost, cost_settings, finished_goals, goal_record,
+                                         held_cost_map, run_key)
+    from glocal_ros.paths import object_fingerprint
+
+    settings, wsrl = cost_settings(step_budget=2000), "task-inputs-wsrl-2000"
+    own, other = run_key(settings), run_key(settings, recipe=wsrl)
+    assert "recipe" not in own and other == {**own, "recipe": wsrl}
+    for work, key in ((tmp_path / "own", own), (tmp_path / "wsrl", other)):
+        work.mkdir()
+        GoalLog(work).append(goal_record(cost_goal("A1", 0, 0, cap=2000), key, object_fingerprint("A1")))
+    assert finished_goals(tmp_path / "wsrl", settings, recipe=wsrl)[("A1", 0)].recipe == wsrl
+    assert [goal.recipe for goal in held_cost_map(tmp_path / "wsrl")[1]] == [wsrl]
+    with pytest.raises(ValueError, match=re.escape(f"other settings (recipe default (now {wsrl}))")):
+        finished_goals(tmp_path / "own", settings, recipe=wsrl)
+    with pytest.raises(ValueError, match=re.escape(f"other settings (recipe {wsrl} (now default))")):
+        finished_goals(tmp_path / "wsrl", settings)
+    with pytest.raises(ValueError, match="unknown fine-tuning recipe 'no-such-recipe'"):
+        check_cost(["A1"], [0], settings, 1, recipe="no-such-recipe")
+
+
 def test_bench_cost_runs_real_goals_stopped_at_b_resumes_and_tabulates(tmp_path, capsys, monkeypatch):
     """Real goals (PyBullet, SAC) through the command, tiny: the paper profile's prior (trained on A0, raw task
     inputs elsewhere), a cap of 16 steps scored every 8 over 2 episodes. One task, then the same work dir with a

@@ -9,7 +9,10 @@ episodes (B = 0.75 of them, ``passes_threshold``). The goal checks before
 its first step too, so a prior already above B costs 0 steps. The goals are
 ``bench transfer``'s (``glocal_app.benches.transfer.run_goal``: in-process,
 ``jobs`` at a time in spawned workers, every stream derived from the seed);
-this module selects them, keeps them and reads the map off them.
+this module selects them, keeps them and reads the map off them. They
+fine-tune with the profile's own recipe, or with ``recipe`` (one of
+``learner_node.sac_settings.FINE_TUNING_RECIPES``): a map per recipe is how a
+remedy for the dip is judged on every object (issue 45, item 3).
 
 Choices:
 
@@ -153,22 +156,28 @@ def cost_settings(step_budget: int = DEFAULT_STEP_BUDGET, eval_interval: int = D
 
 
 def check_cost(tasks: Sequence[str], seeds: Sequence[int], settings: TransferSettings, jobs: int,
-               profile: str = DEFAULT_PROFILE, prior_store: Path | None = None) -> None:
+               profile: str = DEFAULT_PROFILE, prior_store: Path | None = None,
+               recipe: str = PROFILE_RECIPE) -> None:
     """``ValueError`` for anything that would fail later, before any goal runs."""
     if not settings.stop_at_threshold:
         raise ValueError("a cost map's goals stop at B: use cost_settings")
-    check_goals([PROFILE_RECIPE], [INITIAL_POLICY], prior_store, tasks, seeds, settings, jobs, [profile])
+    check_goals([recipe], [INITIAL_POLICY], prior_store, tasks, seeds, settings, jobs, [profile])
 
 
-def run_key(settings: TransferSettings, profile: str = DEFAULT_PROFILE, prior_store: Path | None = None) -> dict:
+def run_key(settings: TransferSettings, profile: str = DEFAULT_PROFILE, prior_store: Path | None = None,
+            recipe: str = PROFILE_RECIPE) -> dict:
     """What, besides its task and seed, decides a goal: a goal of another key is not this map's. The prior
     comes from ``prior_store`` when it holds one (``bench transfer``'s ``prior_stores``)."""
     store = next(store for store in prior_stores(prior_store, profile) if INITIAL_POLICY in store)
     record = store.record(INITIAL_POLICY)
-    return {"step_budget": settings.step_budget, "eval_interval": settings.eval_interval,
-            "eval_episodes": settings.eval_episodes, "threshold": settings.threshold,
-            "num_envs": settings.num_envs, "profile": profile,
-            "prior": f"{INITIAL_POLICY} ({record.model_file}, {record.updated})"}
+    key = {"step_budget": settings.step_budget, "eval_interval": settings.eval_interval,
+           "eval_episodes": settings.eval_episodes, "threshold": settings.threshold,
+           "num_envs": settings.num_envs, "profile": profile,
+           "prior": f"{INITIAL_POLICY} ({record.model_file}, {record.updated})"}
+    # Maps kept before recipes could be chosen ran the profile's own: their keys have no recipe.
+    if recipe != PROFILE_RECIPE:
+        key["recipe"] = recipe
+    return key
 
 
 class GoalLog:
@@ -219,16 +228,17 @@ def goal_record(goal: TransferGoal, key: dict, fingerprint: str) -> dict:
 
 
 def finished_goals(work_dir: Path, settings: TransferSettings, profile: str = DEFAULT_PROFILE,
-                   prior_store: Path | None = None) -> dict[tuple[str, int], TransferGoal]:
+                   prior_store: Path | None = None,
+                   recipe: str = PROFILE_RECIPE) -> dict[tuple[str, int], TransferGoal]:
     """The goals ``work_dir`` holds, by (task, seed); ``ValueError`` when any is of other settings or of an
     object that has changed since."""
     log = GoalLog(work_dir)
-    key, goals, fingerprints = run_key(settings, profile, prior_store), {}, {}
+    key, goals, fingerprints = run_key(settings, profile, prior_store, recipe), {}, {}
     for number, record in enumerate(log.records(), 1):
         if record.get("key") != key:
-            theirs = record.get("key") or {}
-            differ = ", ".join(f"{name} {theirs.get(name)} (now {value})" for name, value in key.items()
-                               if theirs.get(name) != value)
+            theirs = {"recipe": PROFILE_RECIPE, **(record.get("key") or {})}
+            differ = ", ".join(f"{name} {theirs.get(name)} (now {value})"
+                               for name, value in {"recipe": recipe, **key}.items() if theirs.get(name) != value)
             raise ValueError(f"{log.path} holds goals of other settings ({differ}): run with those, or choose "
                              "another --work-dir")
         task, seed = record["task"], int(record["seed"])
@@ -239,7 +249,7 @@ def finished_goals(work_dir: Path, settings: TransferSettings, profile: str = DE
                              "regenerated?): choose another --work-dir")
         if (task, seed) in goals:
             raise ValueError(f"{log.path}, line {number}: goal {task} seed {seed} is in it twice")
-        goals[(task, seed)] = TransferGoal(PROFILE_RECIPE, task, seed, tuple(tuple(p) for p in record["curve"]),
+        goals[(task, seed)] = TransferGoal(recipe, task, seed, tuple(tuple(p) for p in record["curve"]),
                                            settings.eval_episodes, settings.threshold, float(record["wall_s"]),
                                            INITIAL_POLICY, profile)
     return goals
@@ -257,11 +267,11 @@ def held_cost_map(work_dir: Path, objects_dir: Path | None = None,
     try:
         settings = cost_settings(key["step_budget"], key["eval_interval"], key["eval_episodes"], key["num_envs"],
                                  objects_dir)
-        profile = key["profile"]
+        profile, recipe = key["profile"], key.get("recipe", PROFILE_RECIPE)
     except (KeyError, TypeError):
         raise ValueError(f"{Path(work_dir) / GOALS_FILE}, line 1: not a goal of bench cost (its key lacks "
                          "the settings)") from None
-    return settings, list(finished_goals(work_dir, settings, profile, prior_store).values())
+    return settings, list(finished_goals(work_dir, settings, profile, prior_store, recipe).values())
 
 
 @contextmanager
@@ -285,35 +295,36 @@ def run_order(tasks: Sequence[str], seeds: Sequence[int]) -> list[tuple[str, int
 
 def run_cost_map(tasks: Sequence[str], seeds: Sequence[int], settings: TransferSettings, work_dir: Path,
                  jobs: int, profile: str = DEFAULT_PROFILE, log: Callable[[str], None] = print,
-                 prior_store: Path | None = None) -> list[TransferGoal]:
+                 prior_store: Path | None = None, recipe: str = PROFILE_RECIPE) -> list[TransferGoal]:
     """Every (task, seed) goal that ``work_dir`` does not hold yet, ``jobs`` at a time, each appended to it as
     it finishes; then every goal of the selection, in grid order, each object's seeds together."""
-    check_cost(tasks, seeds, settings, jobs, profile, prior_store)
+    check_cost(tasks, seeds, settings, jobs, profile, prior_store, recipe)
     # A work dir of other settings is refused before anything is created in it.
-    finished_goals(work_dir, settings, profile, prior_store)
+    finished_goals(work_dir, settings, profile, prior_store, recipe)
     with work_lock(work_dir):
         goal_log = GoalLog(work_dir)
         goal_log.drop_torn_line()
-        done = finished_goals(work_dir, settings, profile, prior_store)
+        done = finished_goals(work_dir, settings, profile, prior_store, recipe)
         selection = run_order(tasks, seeds)
         pending = [goal for goal in selection if goal not in done]
         log(f"bench cost: {len(selection) - len(pending)} of {len(selection)} goals finished before "
             f"(in {goal_log.path}), {len(pending)} to run, {min(jobs, len(pending))} at a time")
         if pending:
-            key = run_key(settings, profile, prior_store)
+            key = run_key(settings, profile, prior_store, recipe)
             fingerprints = {task: object_fingerprint(task, settings.objects_dir)
                             for task in {task for task, _ in pending}}
-            _run_pending(pending, settings, jobs, profile, prior_store, done, goal_log, key, fingerprints, log)
+            _run_pending(pending, settings, jobs, profile, prior_store, done, goal_log, key, fingerprints, log,
+                         recipe)
     return [done[(task, seed)] for task, seed in _grid_order(tasks, seeds)]
 
 
 def _run_pending(pending: list[tuple[str, int]], settings: TransferSettings, jobs: int, profile: str,
                  prior_store: Path | None, done: dict[tuple[str, int], TransferGoal], goal_log: GoalLog, key: dict,
-                 fingerprints: dict[str, str], log: Callable[[str], None]) -> None:
+                 fingerprints: dict[str, str], log: Callable[[str], None], recipe: str = PROFILE_RECIPE) -> None:
     """Run ``pending`` in spawned workers, appending each goal to ``goal_log`` and ``done`` as it finishes."""
     # Spawned workers: pybullet, torch and JAX do not survive a fork of a process that uses them.
     with ProcessPoolExecutor(max_workers=min(jobs, len(pending)), mp_context=get_context("spawn")) as pool:
-        futures = {pool.submit(run_goal, PROFILE_RECIPE, INITIAL_POLICY, task, seed, settings, prior_store, profile):
+        futures = {pool.submit(run_goal, recipe, INITIAL_POLICY, task, seed, settings, prior_store, profile):
                    (task, seed) for task, seed in pending}
         failed: list[tuple[tuple[str, int], Exception]] = []
         finished = 0
@@ -438,7 +449,7 @@ def _cell(value: float) -> str:
 
 def cost_report(goals: Sequence[TransferGoal], command: str, settings: TransferSettings, tasks: Sequence[str],
                 seeds: Sequence[int], jobs: int, figure: Path | None, work_dir: Path, tabulated: bool = False,
-                profile: str = DEFAULT_PROFILE) -> str:
+                profile: str = DEFAULT_PROFILE, recipe: str = PROFILE_RECIPE) -> str:
     """The report of the finished ``goals`` of a selection of ``tasks`` x ``seeds``."""
     expected = len(tasks) * len(seeds)
     cap = settings.step_budget
@@ -450,7 +461,8 @@ def cost_report(goals: Sequence[TransferGoal], command: str, settings: TransferS
         + (f"tabulated from `{work_dir / GOALS_FILE}`, nothing run" if tabulated else
            f"in-process, {jobs} goal{'s' if jobs != 1 else ''} at a time, goals kept in `{work_dir / GOALS_FILE}`"
            f". Load average at the end {os.getloadavg()[0]:.1f} (the machine is shared)")
-        + f". One seeded Train goal from `{INITIAL_POLICY}` (learner profile {profile}) per object and seed, "
+        + f". One seeded Train goal from `{INITIAL_POLICY}` (learner profile {profile}"
+        + ("" if recipe == PROFILE_RECIPE else f", fine-tuning recipe {recipe}") + ") per object and seed, "
         f"stopped at its first score above B as a curriculum stops it, capped at {cap:,} training steps on "
         f"{settings.num_envs} envs, scored before its first step and every {settings.eval_interval:,} steps over "
         f"{settings.eval_episodes} deterministic episodes; B = {settings.threshold:g}. "
