@@ -166,11 +166,13 @@ def cmd_bench_cost(args: argparse.Namespace) -> int:
     """A learning-cost map: steps to B per object and seed from the prior (``glocal_app.benches.cost``)."""
     from glocal_app.benches.cost import (
         GOALS_FILE,
+        check_against,
         check_cost,
         cost_figure,
         cost_report,
         cost_settings,
         finished_goals,
+        read_cost_report,
         run_cost_map,
         select_tasks,
     )
@@ -179,6 +181,10 @@ def cmd_bench_cost(args: argparse.Namespace) -> int:
                              args.objects_dir)
     tasks = select_tasks(args.tasks)
     command = command_line()
+    against = None
+    if args.against is not None:  # read and checked before any goal runs
+        against = read_cost_report(args.against)
+        check_against(against, settings, args.learner_profile)
     if args.tabulate:
         check_cost(tasks, args.seeds, settings, args.jobs, args.learner_profile, args.prior_store, args.recipe)
         held = finished_goals(args.work_dir, settings, args.learner_profile, args.prior_store, args.recipe)
@@ -197,7 +203,7 @@ def cmd_bench_cost(args: argparse.Namespace) -> int:
             return EXIT_INTERRUPTED
     figure = cost_figure(goals, settings, args.out.with_suffix(".png"))
     report = cost_report(goals, command, settings, tasks, args.seeds, args.jobs, figure, args.work_dir,
-                         tabulated=args.tabulate, profile=args.learner_profile, recipe=args.recipe)
+                         tabulated=args.tabulate, profile=args.learner_profile, recipe=args.recipe, against=against)
     write_bench_report(report, args.out)
     print(f"figure: {figure}")
     return EXIT_OK
@@ -431,6 +437,9 @@ def add_bench_commands(commands) -> None:
     bench_cost.add_argument("--recipe", default=PROFILE_RECIPE,
                             help=f"the goals' fine-tuning recipe: {PROFILE_RECIPE} (the profile's own) or one of "
                                  f"{', '.join(FINE_TUNING_RECIPES)}")
+    bench_cost.add_argument("--against", type=Path, default=None, metavar="REPORT",
+                            help="another map's report of the same settings (another recipe's): the report "
+                                 "adds issue 45's targets and the goals that trained, side by side")
     bench_cost.add_argument("--tabulate", action="store_true",
                             help="run nothing: report the goals of these tasks and seeds that --work-dir holds "
                                  "(same settings)")

@@ -434,6 +434,56 @@ def test_a_cost_map_of_another_recipe_is_another_map(tmp_path):
         check_cost(["A1"], [0], settings, 1, recipe="no-such-recipe")
 
 
+def test_a_recipes_map_is_judged_against_another_read_back_from_its_report(tmp_path):
+    """Issue 45's targets on the goals two maps share: the other map is read back from its report, and one of
+    other settings, or a file that is no report, is refused."""
+    from dataclasses import replace
+
+    from glocal_app.benches.cost import (check_against, cost_report, cost_settings, read_cost_report,
+                                         against_targets)
+
+    settings, wsrl = cost_settings(), "task-inputs-wsrl-2000"
+    report = cost_report(COST_GOALS, "glocal-ros bench cost", settings, ["A1", "A2", "B4", "D3", "G5", "G6"],
+                         [0, 1], 2, None, tmp_path)
+    (tmp_path / "own.md").write_text(report)
+    own = read_cost_report(tmp_path / "own.md")
+    assert (own.profile, own.recipe, own.settings) == ("glocal_ros", "default", settings)
+    assert own.goals == COST_GOALS  # every curve, and the wall-clock to the second
+    check_against(own, settings, "glocal_ros")
+    with pytest.raises(ValueError, match=r"other settings \(cap 15000 \(here 60000\)\)"):
+        check_against(own, cost_settings(step_budget=60_000), "glocal_ros")
+    with pytest.raises(ValueError, match="not a report of bench cost"):
+        read_cost_report(_written(tmp_path / "other.md", "# bench transfer\n"))
+
+    # A recipe that passes every goal the default trained at 1,000 steps, at twice the wall-clock, and never
+    # dips: a goal below B at the start (10 of 100), one evaluation above it.
+    def faster(goal):
+        if goal.steps_to_b == 0:
+            return replace(goal, recipe=wsrl)
+        return replace(goal, recipe=wsrl, curve=((0, goal.start), (1000, 80)), wall_s=2 * goal.wall_s)
+
+    recipe_goals = [faster(goal) for goal in COST_GOALS]
+    unchanged, halved, median, quick, dips, wall = against_targets(recipe_goals, own.goals, settings)
+    assert unchanged.met is None and halved.met is None  # rows C, E and F untested
+    # Started below B: A2 seed 1, B4, D3, G5 and G6 (9 goals); the default's 1,000 1,000 2,000 5,000 14,000 and
+    # four not learned.
+    assert (median.met, median.measured) == (True, "1,000 over 9 (against 14,000)")
+    assert (quick.met, quick.measured) == (False, "9 of 9 goals that started below B (against 4)")
+    assert dips.met is True and dips.measured.startswith("0 of 9 goals that started below B, median drop 0")
+    # 9,000 steps in 540 s against 83,000 in 270 s.
+    assert wall.met is False and wall.measured == f"60.0 s per 1,000 steps against 3.3: {60 / (270 / 83):.2f} times"
+    lines = cost_report(recipe_goals, "glocal-ros bench cost --recipe x", settings, ["A1"], [0, 1], 2, None,
+                        tmp_path, recipe=wsrl, against=own)
+    assert "## Against `own.md` (recipe default)" in lines and "fine-tuning recipe task-inputs-wsrl-2000" in lines
+    assert "| G5 | 0 | 10 | 1000 | - | 0 | 0 | 60 | 30 |" in lines
+    assert read_cost_report(_written(tmp_path / "wsrl.md", lines)).recipe == wsrl
+
+
+def _written(path, text):
+    path.write_text(text)
+    return path
+
+
 def test_bench_cost_runs_real_goals_stopped_at_b_resumes_and_tabulates(tmp_path, capsys, monkeypatch):
     """Real goals (PyBullet, SAC) through the command, tiny: the paper profile's prior (trained on A0, raw task
     inputs elsewhere), a cap of 16 steps scored every 8 over 2 episodes. One task, then the same work dir with a
@@ -480,6 +530,22 @@ def test_bench_cost_runs_real_goals_stopped_at_b_resumes_and_tabulates(tmp_path,
     assert cost("--tasks", "all", *flags, "--tabulate") == 0
     assert "tabulated from" in out.read_text() and "Goals finished: 2 of 49 (a partial map" in out.read_text()
     assert (work / "goals.jsonl").read_text().splitlines() == lines
+
+    # Against a map's own report (the goals trained too little to tell anything: a row each, and G6 passed at
+    # step 0 on its 2 episodes or trained); a report of other settings is refused before anything runs.
+    kept = out.with_name("kept.md")
+    out.rename(kept)
+    assert cost("--tasks", "G6,A0", *flags, "--tabulate", "--against", str(kept)) == 0
+    report = out.read_text()
+    against = report.split("## Against `kept.md` (recipe default)")[1]
+    assert "| rows A, B, C, D: medians still 0 | A 0 (against 0), B untested (against untested)" in against
+    assert against.count("| G6 | 3 |") == (0 if "| G6 | 3 | 0:2 |" in report else 1)
+    capsys.readouterr()
+    with pytest.raises(SystemExit) as exit:
+        cost("--tasks", "G6,A0", *flags[:-1], str(out.with_name("refused.md")), "--step-budget", "24",
+             "--against", str(kept))
+    assert exit.value.code == 2 and "other settings (cap 16 (here 24))" in capsys.readouterr().err
+    assert not out.with_name("refused.md").exists() and (work / "goals.jsonl").read_text().splitlines() == lines
 
     # The same work dir with another cap: refused before anything runs.
     with pytest.raises(SystemExit) as exit:

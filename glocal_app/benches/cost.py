@@ -65,6 +65,16 @@ issue, met or missed (nothing here is tuned to them), the row table, the
 7x7 heat map: cells coloured by log steps to B, cap-hit cells hatched and
 marked, untested cells blank.
 
+Against another map (``--against REPORT``, issue 45): a recipe's map is
+judged on the goals it shares with another map of the same settings, read
+back from that map's report (its every-goal table): the issue's targets (rows
+A-D still 0, rows E-G halved, the goals that start below B learned within
+12,000 steps and without a drop of more than 15 points, wall-clock per
+training step at most 1.5 times), and those goals side by side. Wall-clock
+per training step is total over total of the goals that trained, their
+evaluations included; two maps run on a shared machine at other loads, so a
+ratio near the target tells little.
+
 Resumable: every finished goal is appended, one JSON line, flushed and
 fsynced, to ``goals.jsonl`` in the work directory as it finishes; the same
 command skips the goals found there (a line torn by a kill is dropped and its
@@ -84,6 +94,7 @@ import fcntl
 import json
 import math
 import os
+import re
 import statistics
 import sys
 import time
@@ -94,9 +105,9 @@ from multiprocessing import get_context
 from pathlib import Path
 from typing import Callable, Iterator, Sequence
 
-from glocal_app.benches.transfer import (INITIAL_POLICY, PROFILE_RECIPE, TransferGoal, TransferSettings, check_goals,
-                                         median_steps_to_b, prior_stores, run_goal)
-from glocal_ros.curriculum.learner import PAPER_EVAL_EPISODES
+from glocal_app.benches.transfer import (COLLAPSE_AFTER, INITIAL_POLICY, PROFILE_RECIPE, TransferGoal,
+                                         TransferSettings, check_goals, median_steps_to_b, prior_stores, run_goal)
+from glocal_ros.curriculum.learner import PAPER_EVAL_EPISODES, passes_threshold
 from glocal_ros.files import atomic_write
 from glocal_ros.paths import object_fingerprint
 from glocal_ros.tasks import (COMPLEXITY_LEVELS, DIFFICULTY_LEVELS, NUM_TASKS, grid_coordinates, parse_task_list,
@@ -121,6 +132,14 @@ TARGET_EASY_MEDIAN = 1_000
 TARGET_HARD_ROW = "G"
 TARGET_HARD_MEDIAN = 15_000
 TARGET_START_PASSES = 15  # of NUM_TASKS objects
+
+#: Issue 45's targets for a recipe's map against another map (``--against``); reported, never tuned for.
+TARGET_UNCHANGED_ROWS = ("A", "B", "C", "D")  # medians still 0
+TARGET_HALVED_ROWS = ("E", "F", "G")  # medians at most half the other map's
+TARGET_TRAINED_STEPS = 12_000  # the goals that start below B: their median steps to B at most this,
+TARGET_QUICK_GOALS = 10  # and at least this many of them pass B in fewer steps
+TARGET_DROP_POINTS = 15.0  # none of them further below its start (``TransferGoal.drop_points``)
+TARGET_WALL_RATIO = 1.5  # wall-clock per training step against the other map's
 
 
 def per_row_tasks(per_row: int) -> list[str]:
@@ -445,12 +464,164 @@ def _cell(value: float) -> str:
     return "not learned" if math.isinf(value) else f"{value:.0f}"
 
 
+# ---- a map against another (issue 45) ------------------------------------------------------------------------
+
+@dataclass(frozen=True)
+class HeldMap:
+    """A cost map read back from its report (``read_cost_report``)."""
+
+    path: Path
+    profile: str
+    recipe: str
+    settings: TransferSettings
+    goals: list[TransferGoal]
+
+
+_REPORT_SETTINGS = re.compile(
+    r"\(learner profile (?P<profile>[^,)]+)(?:, fine-tuning recipe (?P<recipe>[^)]+))?\) per object and seed, "
+    r"stopped at its first score above B as a curriculum stops it, capped at (?P<cap>[\d,]+) training steps on "
+    r"(?P<envs>\d+) envs, scored before its first step and every (?P<interval>[\d,]+) steps over "
+    r"(?P<episodes>\d+) deterministic episodes")
+_EVERY_GOAL = "Every goal (scores out of"  # the title of ``cost_report``'s every-goal table
+
+
+def read_cost_report(path: Path) -> HeldMap:
+    """The map a ``cost_report`` at ``path`` shows: its settings (from its opening paragraph) and every goal
+    (its every-goal table, wall-clock to the second); ``ValueError`` naming the file when it is not one."""
+    text = Path(path).read_text()
+    found = _REPORT_SETTINGS.search(text)
+    if found is None or _EVERY_GOAL not in text:
+        raise ValueError(f"{path}: not a report of bench cost (no settings paragraph or no every-goal table)")
+    number = lambda name: int(found[name].replace(",", ""))  # noqa: E731
+    settings = cost_settings(number("cap"), number("interval"), number("episodes"), number("envs"))
+    recipe = found["recipe"] or PROFILE_RECIPE
+    goals = []
+    for line in text[text.index(_EVERY_GOAL):].splitlines()[4:]:  # the title, a blank line, the header
+        cells = [cell.strip() for cell in line.strip().strip("|").split("|")]
+        if len(cells) != 5:
+            break
+        task, seed, scores, _, wall_s = cells
+        curve = tuple((int(steps), int(score)) for steps, score in (point.split(":") for point in scores.split()))
+        goals.append(TransferGoal(recipe, task, int(seed), curve, settings.eval_episodes, settings.threshold,
+                                  float(wall_s), INITIAL_POLICY, found["profile"]))
+    if not goals:
+        raise ValueError(f"{path}: its every-goal table holds no goal")
+    return HeldMap(Path(path), found["profile"], recipe, settings, goals)
+
+
+def check_against(other: HeldMap, settings: TransferSettings, profile: str) -> None:
+    """``ValueError`` when ``other`` is a map of other settings than these: its goals would not compare."""
+    mine = (profile, settings.step_budget, settings.eval_interval, settings.eval_episodes, settings.num_envs)
+    theirs = (other.profile, other.settings.step_budget, other.settings.eval_interval,
+              other.settings.eval_episodes, other.settings.num_envs)
+    differ = [f"{name} {their} (here {my})" for name, my, their
+              in zip(("profile", "cap", "evaluation interval", "episodes", "envs"), mine, theirs) if my != their]
+    if differ:
+        raise ValueError(f"{other.path} is a map of other settings ({', '.join(differ)}): it does not compare")
+
+
+def started_below_b(goals: Sequence[TransferGoal]) -> list[TransferGoal]:
+    """The goals that had to train: below B at their check before the first step."""
+    return [goal for goal in goals if not passes_threshold(goal.start, goal.threshold)]
+
+
+def wall_per_kilostep(goals: Sequence[TransferGoal]) -> float:
+    """Seconds of wall-clock per 1,000 training steps, total over total (NaN without a training step)."""
+    steps = sum(goal.curve[-1][0] for goal in goals)
+    return 1000.0 * sum(goal.wall_s for goal in goals) / steps if steps else math.nan
+
+
+def against_targets(goals: Sequence[TransferGoal], other: Sequence[TransferGoal],
+                    settings: TransferSettings) -> list[Target]:
+    """Issue 45's targets for ``goals`` against ``other``, on the (task, seed) goals both hold."""
+    theirs_by_key = {(goal.task, goal.seed): goal for goal in other}
+    mine = [goal for goal in goals if (goal.task, goal.seed) in theirs_by_key]
+    theirs = [theirs_by_key[(goal.task, goal.seed)] for goal in mine]
+    rows, their_rows = row_medians(mine), row_medians(theirs)
+
+    def rows_text(letters: Sequence[str]) -> str:
+        return ", ".join(f"{letter} {_median_text(rows.get(letter), settings)} "
+                         f"(against {_median_text(their_rows.get(letter), settings)})" for letter in letters)
+
+    unchanged = [rows.get(letter) for letter in TARGET_UNCHANGED_ROWS]
+    halved = [(rows.get(letter), their_rows.get(letter)) for letter in TARGET_HALVED_ROWS]
+    trained, their_trained = started_below_b(mine), started_below_b(theirs)
+    median, their_median = (median_steps_to_b(trained) if trained else None,
+                            median_steps_to_b(their_trained) if their_trained else None)
+
+    def quick(of: Sequence[TransferGoal]) -> int:
+        return sum(goal.steps_to_b is not None and goal.steps_to_b < TARGET_TRAINED_STEPS for goal in of)
+
+    def dropped(of: Sequence[TransferGoal]) -> int:
+        return sum(goal.drop_points > TARGET_DROP_POINTS for goal in of)
+
+    def drops(of: Sequence[TransferGoal]) -> str:
+        return f"median drop {statistics.median(g.drop_points for g in of):.0f}" if of else "none trained"
+
+    wall, their_wall = wall_per_kilostep(trained), wall_per_kilostep(their_trained)
+    ratio = wall / their_wall if their_wall else math.nan
+    count = f"of {len(trained)} goals that started below B"
+    none_trained = "none of the shared goals started below B"
+    return [
+        Target(f"rows {', '.join(TARGET_UNCHANGED_ROWS)}: medians still 0", rows_text(TARGET_UNCHANGED_ROWS),
+               None if None in unchanged else all(value == 0 for value in unchanged)),
+        Target(f"rows {', '.join(TARGET_HALVED_ROWS)}: medians at most half the other map's",
+               rows_text(TARGET_HALVED_ROWS),
+               None if any(None in pair for pair in halved) else
+               all(value == 0 or (math.isfinite(value) and 2 * value <= their) for value, their in halved)),
+        Target(f"the goals that started below B: median steps to B <= {TARGET_TRAINED_STEPS:,}",
+               none_trained if median is None else
+               f"{_median_text(median, settings)} over {len(trained)} (against {_median_text(their_median, settings)})",
+               None if median is None else median <= TARGET_TRAINED_STEPS),
+        Target(f"at least {TARGET_QUICK_GOALS} of them pass B in fewer than {TARGET_TRAINED_STEPS:,} steps",
+               f"{quick(trained)} {count} (against {quick(their_trained)})" if trained else none_trained,
+               None if not trained else quick(trained) >= TARGET_QUICK_GOALS),
+        Target(f"none of them more than {TARGET_DROP_POINTS:.0f} points of 100 below its start from "
+               f"{COLLAPSE_AFTER:,} steps on",
+               f"{dropped(trained)} {count}, {drops(trained)} (against {dropped(their_trained)}, "
+               f"{drops(their_trained)})" if trained else none_trained,
+               None if not trained else dropped(trained) == 0),
+        Target(f"wall-clock per training step at most {TARGET_WALL_RATIO} times the other map's",
+               "no training step in one map or both" if math.isnan(ratio) else
+               f"{wall:.1f} s per 1,000 steps against {their_wall:.1f}: {ratio:.2f} times",
+               None if math.isnan(ratio) else ratio <= TARGET_WALL_RATIO),
+    ]
+
+
+def against_lines(goals: Sequence[TransferGoal], other: HeldMap, settings: TransferSettings) -> list[str]:
+    """The report's section on ``goals`` against ``other``: the targets, then every shared goal that started
+    below B side by side."""
+    theirs = {(goal.task, goal.seed): goal for goal in other.goals}
+    shared = [goal for goal in goals if (goal.task, goal.seed) in theirs]
+    lines = ["", f"## Against `{other.path.name}` (recipe {other.recipe})", "",
+             f"The {len(shared)} goals of this map that `{other.path.name}` holds too (its every-goal table). "
+             "Targets of issue 45 (reported, not tuned for):", "",
+             "| target | measured | |", "| --- | --- | --- |"]
+    for target in against_targets(shared, other.goals, settings):
+        verdict = "untested" if target.met is None else "met" if target.met else "missed"
+        lines.append(f"| {target.name} | {target.measured} | {verdict} |")
+
+    def steps(goal: TransferGoal) -> str:
+        return "-" if goal.steps_to_b is None else str(goal.steps_to_b)
+
+    lines += ["", f"The goals that started below B (steps to B, - not learned within the cap; drop in points of "
+              f"100 below the start from {COLLAPSE_AFTER:,} steps on):", "",
+              "| object | seed | start | steps to B | against | drop | against | s | against |",
+              "| --- | ---: | ---: | ---: | ---: | ---: | ---: | ---: | ---: |"]
+    for goal in started_below_b(shared):
+        their = theirs[(goal.task, goal.seed)]
+        lines.append(f"| {goal.task} | {goal.seed} | {goal.start} | {steps(goal)} | {steps(their)} "
+                     f"| {goal.drop_points:.0f} | {their.drop_points:.0f} | {goal.wall_s:.0f} | {their.wall_s:.0f} |")
+    return lines
+
+
 # ---- report and figure ----------------------------------------------------------------------------------------
 
 def cost_report(goals: Sequence[TransferGoal], command: str, settings: TransferSettings, tasks: Sequence[str],
                 seeds: Sequence[int], jobs: int, figure: Path | None, work_dir: Path, tabulated: bool = False,
-                profile: str = DEFAULT_PROFILE, recipe: str = PROFILE_RECIPE) -> str:
-    """The report of the finished ``goals`` of a selection of ``tasks`` x ``seeds``."""
+                profile: str = DEFAULT_PROFILE, recipe: str = PROFILE_RECIPE, against: HeldMap | None = None) -> str:
+    """The report of the finished ``goals`` of a selection of ``tasks`` x ``seeds``; with ``against``, the
+    goals against that map's as well."""
     expected = len(tasks) * len(seeds)
     cap = settings.step_budget
     lines = [
@@ -524,11 +695,13 @@ def cost_report(goals: Sequence[TransferGoal], command: str, settings: TransferS
             cells.append("not run" if goal is None else "-" if goal.steps_to_b is None else str(goal.steps_to_b))
         lines.append(f"| {task} | " + " | ".join(cells) + f" | {_cell(objects[task])} |")
 
-    lines += ["", f"Every goal (scores out of {settings.eval_episodes}, step:score):", "",
+    lines += ["", f"{_EVERY_GOAL} {settings.eval_episodes}, step:score):", "",
               "| object | seed | scores | steps to B | s |", "| --- | ---: | --- | ---: | ---: |"]
     for goal in goals:
         lines.append(f"| {goal.task} | {goal.seed} | " + " ".join(f"{s}:{score}" for s, score in goal.curve)
                      + f" | {'-' if goal.steps_to_b is None else goal.steps_to_b} | {goal.wall_s:.0f} |")
+    if against is not None:
+        lines += against_lines(goals, against, settings)
     return "\n".join(lines) + "\n"
 
 
