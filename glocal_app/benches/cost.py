@@ -454,6 +454,15 @@ def targets(goals: Sequence[TransferGoal], settings: TransferSettings) -> list[T
     ]
 
 
+def target_table(measured: Sequence[Target]) -> list[str]:
+    """The markdown table of ``measured`` targets: each met, missed or untested (nothing to judge it on)."""
+    lines = ["| target | measured | |", "| --- | --- | --- |"]
+    for target in measured:
+        verdict = "untested" if target.met is None else "met" if target.met else "missed"
+        lines.append(f"| {target.name} | {target.measured} | {verdict} |")
+    return lines
+
+
 def _median_text(value: float | None, settings: TransferSettings) -> str:
     if value is None:
         return "untested"
@@ -595,11 +604,8 @@ def against_lines(goals: Sequence[TransferGoal], other: HeldMap, settings: Trans
     shared = [goal for goal in goals if (goal.task, goal.seed) in theirs]
     lines = ["", f"## Against `{other.path.name}` (recipe {other.recipe})", "",
              f"The {len(shared)} goals of this map that `{other.path.name}` holds too (its every-goal table). "
-             "Targets of issue 45 (reported, not tuned for):", "",
-             "| target | measured | |", "| --- | --- | --- |"]
-    for target in against_targets(shared, other.goals, settings):
-        verdict = "untested" if target.met is None else "met" if target.met else "missed"
-        lines.append(f"| {target.name} | {target.measured} | {verdict} |")
+             "Targets of issue 45 (reported, not tuned for):", ""]
+    lines += target_table(against_targets(shared, other.goals, settings))
 
     def steps(goal: TransferGoal) -> str:
         return "-" if goal.steps_to_b is None else str(goal.steps_to_b)
@@ -652,10 +658,7 @@ def cost_report(goals: Sequence[TransferGoal], command: str, settings: TransferS
     if figure is not None:
         lines += [f"Figure: `{figure.name}`, the map as a heat map (log steps to B, from one interval, where 0 "
                   "is drawn, to the cap; hatched: not learned within the cap; blank: untested).", ""]
-    lines += ["Targets of issue 31 (reported, not tuned for):", "", "| target | measured | |", "| --- | --- | --- |"]
-    for target in targets(goals, settings):
-        verdict = "untested" if target.met is None else "met" if target.met else "missed"
-        lines.append(f"| {target.name} | {target.measured} | {verdict} |")
+    lines += ["Targets of issue 31 (reported, not tuned for):", ""] + target_table(targets(goals, settings))
 
     objects = object_medians(goals)
     rows = row_medians(goals)
